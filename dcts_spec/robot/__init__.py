@@ -1,0 +1,1 @@
+"""Robot models: built-in robots, URDF loading, extra frames and merged limits."""
