@@ -1,0 +1,81 @@
+"""The resolved robot: a Pinocchio model with the spec's frames, and the merged joint limits."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+
+
+@dataclass(frozen=True)
+class JointLimits:
+    """Joint bounds in SI units, one entry per joint; ±inf where there is none."""
+
+    q_min: np.ndarray
+    q_max: np.ndarray
+    v_max: np.ndarray
+    tau_max: np.ndarray
+    a_max: np.ndarray  # inf unless the spec gives joint accelerations
+
+    @staticmethod
+    def of_model(model: pin.Model) -> "JointLimits":
+        """The limits a URDF declares (Pinocchio stores 0 or a huge number where none is given)."""
+        n = model.nv
+
+        def clean(values: np.ndarray, missing_if_zero: bool) -> np.ndarray:
+            out = np.array(values, dtype=float).copy()
+            out[np.abs(out) >= 1e10] = np.inf * np.sign(out[np.abs(out) >= 1e10])
+            if missing_if_zero:
+                out[out <= 0] = np.inf
+            return out
+
+        return JointLimits(
+            q_min=clean(model.lowerPositionLimit, False),
+            q_max=clean(model.upperPositionLimit, False),
+            v_max=clean(model.velocityLimit, True),
+            tau_max=clean(model.effortLimit, True),
+            a_max=np.full(n, np.inf),
+        )
+
+
+@dataclass(frozen=True)
+class CartesianBound:
+    """c_min ≤ p_frame[axis] ≤ c_max, in world coordinates (the paper's limited space)."""
+
+    frame: str
+    axis: int  # 0, 1, 2 for x, y, z
+    c_min: float  # -inf if none
+    c_max: float  # +inf if none
+    v_max: float  # inf if none
+    a_max: float  # braking acceleration used by the viability bound
+
+
+@dataclass
+class Robot:
+    """A fixed-base robot ready for the compiler: model, joint names, limits."""
+
+    name: str
+    model: pin.Model
+    urdf_path: Path
+    limits: JointLimits
+    urdf_limits: JointLimits
+    cartesian_bounds: tuple[CartesianBound, ...] = ()
+
+    @property
+    def nv(self) -> int:
+        return self.model.nv
+
+    @property
+    def joint_names(self) -> list[str]:
+        """Names of the (1-DOF) joints, in the order of q."""
+        return [self.model.names[i] for i in range(1, self.model.njoints)]
+
+    def has_frame(self, name: str) -> bool:
+        return self.model.existFrame(name)
+
+    def neutral_configuration(self) -> np.ndarray:
+        """Middle of the joint range where it is finite, zero otherwise."""
+        lo, hi = self.limits.q_min, self.limits.q_max
+        return np.where(np.isfinite(lo) & np.isfinite(hi), 0.5 * (lo + hi), 0.0)

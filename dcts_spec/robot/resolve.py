@@ -1,0 +1,190 @@
+"""Resolve the `robot` and `limits` sections of a spec into a `Robot`, with located diagnostics."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+
+from ..spec import Diagnostic, Spec, SpecError
+from ..spec.errors import did_you_mean
+from ..spec.types import as_list, size_of
+from ..spec.units import to_si
+from .builtin import builtin_locked_joints, builtin_urdf_path, lock_joints
+from .model import CartesianBound, JointLimits, Robot
+
+AXIS_INDEX = {"x": 0, "y": 1, "z": 2}
+
+
+def resolve_robot(spec: Spec) -> tuple[Robot, list[Diagnostic]]:
+    """Build the robot of a spec; raises SpecError with every problem, returns the warnings."""
+    diags: list[Diagnostic] = []
+    src = spec.source
+    model, urdf_path = _load_model(spec, diags)
+    if model is None:
+        raise SpecError(diags)
+    _check_joint_types(model, src, diags)
+    _add_frames(spec, model, diags)
+    urdf_limits = JointLimits.of_model(model)
+    limits = _merge_limits(spec, urdf_limits, model.nv, diags)
+    bounds = _cartesian_bounds(spec, model, diags)
+    if any(d.severity == "error" for d in diags):
+        raise SpecError(diags)
+    model.lowerPositionLimit = np.where(np.isfinite(limits.q_min), limits.q_min, -1e10)
+    model.upperPositionLimit = np.where(np.isfinite(limits.q_max), limits.q_max, 1e10)
+    name = spec.robot.model or Path(spec.robot.urdf or "robot").stem
+    robot = Robot(name, model, urdf_path, limits, urdf_limits, bounds)
+    return robot, diags
+
+
+def _load_model(spec: Spec, diags: list[Diagnostic]) -> tuple[pin.Model | None, Path]:
+    src = spec.source
+    if spec.robot.model is not None:
+        path = builtin_urdf_path(spec.robot.model)
+        locked = {**builtin_locked_joints(spec.robot.model), **spec.robot.locked_joints}
+        where = ("robot", "model")
+    else:
+        path = Path(spec.robot.urdf or "")
+        if not path.is_absolute():
+            path = spec.base_dir / path
+        locked = dict(spec.robot.locked_joints)
+        where = ("robot", "urdf")
+        if not path.is_file():
+            diags.append(src.diagnostic(where, f"URDF file not found: {path}"))
+            return None, path
+    try:
+        full = pin.buildModelFromUrdf(str(path))
+    except Exception as exc:  # Pinocchio raises plain RuntimeErrors for bad URDFs
+        diags.append(src.diagnostic(where, f"cannot load the URDF {path}: {exc}"))
+        return None, path
+    known = set(full.names)
+    unknown = [j for j in locked if j not in known]
+    for j in unknown:
+        hint = did_you_mean(j, list(full.names)[1:], n=3)
+        diags.append(src.diagnostic(("robot", "locked_joints", j), f"no joint {j!r} to lock{hint}"))
+    if unknown:
+        return None, path
+    return lock_joints(full, locked), path
+
+
+def _check_joint_types(model: pin.Model, src, diags: list[Diagnostic]) -> None:
+    for jid in range(1, model.njoints):
+        joint = model.joints[jid]
+        if joint.nq != 1 or joint.nv != 1:
+            diags.append(
+                src.diagnostic(
+                    ("robot",),
+                    f"joint {model.names[jid]!r} is a {joint.shortname()} (nq={joint.nq}); only revolute and "
+                    "prismatic joints are supported — lock it with robot.locked_joints",
+                )
+            )
+
+
+def _add_frames(spec: Spec, model: pin.Model, diags: list[Diagnostic]) -> None:
+    src = spec.source
+    for name, frame in spec.robot.frames.items():
+        path = ("robot", "frames", name)
+        if model.existFrame(name):
+            diags.append(src.diagnostic(path, f"the robot already has a frame named {name!r}; choose another name"))
+            continue
+        if not model.existFrame(frame.parent):
+            hint = did_you_mean(frame.parent, [f.name for f in model.frames], n=3)
+            diags.append(src.diagnostic(path + ("parent",), f"no link, joint or frame named {frame.parent!r}{hint}"))
+            continue
+        parent = model.frames[model.getFrameId(frame.parent)]
+        rpy = to_si(list(frame.rpy), frame.unit)
+        local = pin.SE3(pin.rpy.rpyToMatrix(*rpy), np.array(frame.xyz))
+        placement = parent.placement * local
+        model.addFrame(
+            pin.Frame(name, parent.parentJoint, model.getFrameId(frame.parent), placement, pin.FrameType.OP_FRAME)
+        )
+
+
+def _vector(value, unit: str, n: int, path: tuple, src, diags: list[Diagnostic], what: str) -> np.ndarray | None:
+    """A scalar-or-vector limit in SI, or None (with a diagnostic) if its size is wrong."""
+    size = size_of(value)
+    if size is not None and size != n:
+        diags.append(src.diagnostic(path, f"{what} has {size} values but the robot has {n} joints"))
+        return None
+    return np.array(to_si(as_list(value, n), unit), dtype=float)
+
+
+def _merge_limits(spec: Spec, urdf: JointLimits, n: int, diags: list[Diagnostic]) -> JointLimits:
+    """Spec limits override the URDF's; wider than the URDF only when explicitly allowed."""
+    src = spec.source
+    lim = spec.limits
+    q_min, q_max, v_max, tau_max, a_max = urdf.q_min, urdf.q_max, urdf.v_max, urdf.tau_max, urdf.a_max
+    if (jp := lim.joint_position) is not None:
+        base = ("limits", "joint_position")
+        lo = _vector(jp.min, jp.unit, n, base + ("min",), src, diags, "min") if jp.min is not None else q_min
+        hi = _vector(jp.max, jp.unit, n, base + ("max",), src, diags, "max") if jp.max is not None else q_max
+        if lo is not None and hi is not None:
+            bad = np.flatnonzero(lo >= hi)
+            if bad.size:
+                j = bad[0]
+                diags.append(
+                    src.diagnostic(base + ("min",), f"min must be smaller than max (joint {j + 1}: {lo[j]:.4g} ≥ {hi[j]:.4g} rad)")
+                )
+            _outside(lo < urdf.q_min - 1e-9, base + ("min",), "below the URDF's lower limit", jp.allow_outside_urdf, src, diags)
+            _outside(hi > urdf.q_max + 1e-9, base + ("max",), "above the URDF's upper limit", jp.allow_outside_urdf, src, diags)
+            q_min, q_max = lo, hi
+    if (jv := lim.joint_velocity) is not None:
+        path = ("limits", "joint_velocity", "max")
+        v = _vector(jv.max, jv.unit, n, path, src, diags, "max")
+        if v is not None:
+            _positive(v, path, src, diags)
+            _outside(v > urdf.v_max + 1e-9, path, "above the URDF's velocity limit", jv.allow_outside_urdf, src, diags)
+            v_max = v
+    if (ja := lim.joint_acceleration) is not None:
+        path = ("limits", "joint_acceleration", "max")
+        a = _vector(ja.max, ja.unit, n, path, src, diags, "max")
+        if a is not None:
+            _positive(a, path, src, diags)
+            a_max = a
+    if (jt := lim.joint_torque) is not None:
+        path = ("limits", "joint_torque", "max")
+        t = _vector(jt.max, jt.unit, n, path, src, diags, "max")
+        if t is not None:
+            _positive(t, path, src, diags)
+            _outside(t > urdf.tau_max + 1e-9, path, "above the URDF's effort limit", jt.allow_outside_urdf, src, diags)
+            tau_max = t
+    return JointLimits(q_min=q_min, q_max=q_max, v_max=v_max, tau_max=tau_max, a_max=a_max)
+
+
+def _positive(values: np.ndarray, path: tuple, src, diags: list[Diagnostic]) -> None:
+    bad = np.flatnonzero(values <= 0)
+    if bad.size:
+        diags.append(src.diagnostic(path, f"must be > 0 (joint {bad[0] + 1}: {values[bad[0]]:.4g})"))
+
+
+def _outside(mask: np.ndarray, path: tuple, what: str, allowed: bool, src, diags: list[Diagnostic]) -> None:
+    joints = [int(j) + 1 for j in np.flatnonzero(mask)]
+    if not joints:
+        return
+    if allowed:
+        diags.append(src.diagnostic(path, f"joints {joints}: {what} (widened on purpose: allow_outside_urdf)", "warning"))
+    else:
+        diags.append(
+            src.diagnostic(path, f"joints {joints}: {what}; narrow it, or set allow_outside_urdf: true to widen on purpose")
+        )
+
+
+def _cartesian_bounds(spec: Spec, model: pin.Model, diags: list[Diagnostic]) -> tuple[CartesianBound, ...]:
+    out = []
+    for i, c in enumerate(spec.limits.cartesian):
+        if not model.existFrame(c.frame):
+            hint = did_you_mean(c.frame, [f.name for f in model.frames], n=3)
+            diags.append(spec.source.diagnostic(("limits", "cartesian", i, "frame"), f"no frame {c.frame!r}{hint}"))
+            continue
+        out.append(
+            CartesianBound(
+                frame=c.frame,
+                axis=AXIS_INDEX[c.axis],
+                c_min=-np.inf if c.min is None else c.min,
+                c_max=np.inf if c.max is None else c.max,
+                v_max=np.inf if c.max_velocity is None else c.max_velocity,
+                a_max=c.max_acceleration,
+            )
+        )
+    return tuple(out)

@@ -1,0 +1,1 @@
+"""Simulation of the controlled robot in MuJoCo."""

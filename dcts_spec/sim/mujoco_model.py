@@ -1,0 +1,307 @@
+"""MuJoCo model of a fixed-base Pinocchio model, built with :class:`mujoco.MjSpec`.
+
+The MuJoCo model reproduces the Pinocchio rigid-body dynamics exactly (same joint
+placements, axes and inertias; no armature, damping, friction loss or joint limits), so
+that the only model mismatch seen by a controller is the one added on purpose: payloads.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import coal
+import mujoco
+import numpy as np
+import pinocchio as pin
+
+# MuJoCo rejects moving bodies whose mass or principal inertia is below mjMINVAL (1e-15),
+# and a `fullinertia` that is not positive definite. Such bodies (massless intermediate
+# links, point masses) get this much mass and isotropic inertia added: safely above
+# mjMINVAL, and a relative change of the mass matrix of ~1e-14 for unit link lengths.
+_INERTIA_EPS = 1e-14
+
+_CAPSULE_RADIUS = 0.03
+_CAPSULE_RGBA = (0.7, 0.7, 0.7, 1.0)
+
+_MESH_SUFFIXES = (".stl", ".obj")
+
+_HINGE = mujoco.mjtJoint.mjJNT_HINGE
+_SLIDE = mujoco.mjtJoint.mjJNT_SLIDE
+_JOINT_TYPES: dict[str, tuple[mujoco.mjtJoint, tuple[float, float, float] | None]] = {
+    "JointModelRX": (_HINGE, (1.0, 0.0, 0.0)),
+    "JointModelRY": (_HINGE, (0.0, 1.0, 0.0)),
+    "JointModelRZ": (_HINGE, (0.0, 0.0, 1.0)),
+    "JointModelRevoluteUnaligned": (_HINGE, None),
+    "JointModelPX": (_SLIDE, (1.0, 0.0, 0.0)),
+    "JointModelPY": (_SLIDE, (0.0, 1.0, 0.0)),
+    "JointModelPZ": (_SLIDE, (0.0, 0.0, 1.0)),
+    "JointModelPrismaticUnaligned": (_SLIDE, None),
+}
+
+
+@dataclass(frozen=True)
+class Payload:
+    """A rigid mass welded to a Pinocchio frame, present in MuJoCo only.
+
+    Attributes:
+        frame: Name of the Pinocchio frame the payload is attached to.
+        mass: Mass (kg).
+        com: Centre of mass, in the frame (m).
+        inertia: Principal inertia about the centre of mass, axes aligned with the frame
+            (kg·m²); ``None`` for a point mass.
+    """
+
+    frame: str
+    mass: float
+    com: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    inertia: tuple[float, float, float] | None = None
+
+
+def build_mujoco_spec(
+    model: pin.Model,
+    *,
+    timestep: float = 0.001,
+    integrator: str = "implicitfast",
+    payloads: Sequence[Payload] = (),
+    geometry: pin.GeometryModel | None = None,
+) -> mujoco.MjSpec:
+    """MuJoCo spec of a fixed-base Pinocchio model, to extend (floor, cameras) before compiling.
+
+    See :func:`build_mujoco_model` for what the spec contains.
+    """
+    spec = mujoco.MjSpec()
+    spec.modelname = model.name
+    # Bodies carry the Pinocchio inertias; geoms must not add mass.
+    spec.compiler.inertiafromgeom = mujoco.mjtInertiaFromGeom.mjINERTIAFROMGEOM_FALSE
+    spec.option.timestep = timestep
+    spec.option.integrator = _integrator(integrator)
+    spec.option.gravity = model.gravity.linear
+
+    bodies: list[mujoco.MjsBody] = [spec.worldbody]
+    for i in range(1, model.njoints):
+        parent = bodies[model.parents[i]]
+        pos, quat = _pos_quat(model.jointPlacements[i])
+        body = parent.add_body(name=_body_name(model, i), pos=pos, quat=quat)
+        joint_type, axis = _joint_type_and_axis(model.joints[i])
+        body.add_joint(
+            name=model.names[i],
+            type=joint_type,
+            axis=axis,
+            limited=mujoco.mjtLimited.mjLIMITED_FALSE,
+            armature=0.0,
+            damping=0.0,
+            frictionloss=0.0,
+        )
+        _set_inertial(body, model.inertias[i])
+        spec.add_actuator(
+            name=model.names[i],
+            target=model.names[i],
+            trntype=mujoco.mjtTrn.mjTRN_JOINT,
+            gear=[1.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+            ctrllimited=mujoco.mjtLimited.mjLIMITED_FALSE,
+            forcelimited=mujoco.mjtLimited.mjLIMITED_FALSE,
+        )
+        bodies.append(body)
+
+    for frame in model.frames:
+        if frame.type in (pin.FrameType.OP_FRAME, pin.FrameType.BODY):
+            pos, quat = _pos_quat(frame.placement)
+            bodies[frame.parentJoint].add_site(name=frame.name, pos=pos, quat=quat)
+
+    for k, payload in enumerate(payloads):
+        _add_payload(model, bodies, payload, f"payload_{k}")
+
+    if geometry is None:
+        _add_capsules(model, bodies)
+    else:
+        _add_geometry(spec, geometry, bodies)
+    return spec
+
+
+def build_mujoco_model(
+    model: pin.Model,
+    *,
+    timestep: float = 0.001,
+    integrator: str = "implicitfast",
+    payloads: Sequence[Payload] = (),
+    geometry: pin.GeometryModel | None = None,
+) -> mujoco.MjModel:
+    """MuJoCo model of a fixed-base Pinocchio model with revolute and prismatic joints.
+
+    - One body per Pinocchio joint, named after the joint's child link, placed by
+      ``model.jointPlacements`` and carrying ``model.inertias``; ``qpos``/``qvel`` follow
+      Pinocchio's ``idx_q``/``idx_v``.
+    - No armature, damping, friction loss or joint limits: limits are the controller's job.
+    - One ``motor`` actuator per joint, named like the joint, gear 1 and no control clamp:
+      ``data.ctrl`` is the joint torque (or force).
+    - One site per Pinocchio ``BODY`` or ``OP_FRAME`` frame, named like the frame.
+    - ``payloads`` are welded bodies that Pinocchio does not know about.
+    - ``geometry`` (a Pinocchio collision or visual model) gives the geoms: primitives and
+      STL/OBJ meshes, other meshes (``.dae``) are skipped; without it, capsules join
+      consecutive joint origins. Geoms never collide (contype = conaffinity = 0).
+
+    Args:
+        model: Fixed-base Pinocchio model.
+        timestep: Simulation time step (s).
+        integrator: ``"euler"``, ``"rk4"``, ``"implicit"`` or ``"implicitfast"``.
+        payloads: Masses added to the MuJoCo model only.
+        geometry: Geometry to display; mesh paths as resolved by Pinocchio's loaders.
+
+    Raises:
+        ValueError: On a joint that is neither revolute nor prismatic, an unknown
+            integrator or payload frame, or a joint order MuJoCo cannot reproduce.
+    """
+    spec = build_mujoco_spec(
+        model, timestep=timestep, integrator=integrator, payloads=payloads, geometry=geometry
+    )
+    mj_model = spec.compile()
+    _check_joint_order(model, mj_model)
+    return mj_model
+
+
+def mass_matrix(mj_model: mujoco.MjModel, mj_data: mujoco.MjData, q: np.ndarray) -> np.ndarray:
+    """Dense joint-space mass matrix at ``q`` (sets ``mj_data.qpos``)."""
+    mj_data.qpos[:] = q
+    mujoco.mj_fwdPosition(mj_model, mj_data)
+    M = np.zeros((mj_model.nv, mj_model.nv))
+    # MuJoCo 4 takes mjData as second argument (MuJoCo 3 took d.qM as third).
+    mujoco.mj_fullM(mj_model, mj_data, M)
+    return M
+
+
+def bias_forces(
+    mj_model: mujoco.MjModel, mj_data: mujoco.MjData, q: np.ndarray, dq: np.ndarray
+) -> np.ndarray:
+    """Coriolis, centrifugal and gravity forces at ``(q, dq)`` (sets ``qpos``, ``qvel``)."""
+    mj_data.qpos[:] = q
+    mj_data.qvel[:] = dq
+    mujoco.mj_fwdPosition(mj_model, mj_data)
+    mujoco.mj_fwdVelocity(mj_model, mj_data)
+    return mj_data.qfrc_bias.copy()
+
+
+def _integrator(name: str) -> mujoco.mjtIntegrator:
+    choices = ("euler", "rk4", "implicit", "implicitfast")
+    if name not in choices:
+        raise ValueError(f"unknown integrator {name!r}; choose one of {', '.join(choices)}")
+    return mujoco.mjtIntegrator.__members__[f"mjINT_{name.upper()}"]
+
+
+def _pos_quat(placement: pin.SE3) -> tuple[np.ndarray, np.ndarray]:
+    x, y, z, w = pin.Quaternion(placement.rotation).coeffs()
+    return placement.translation.copy(), np.array([w, x, y, z])
+
+
+def _body_name(model: pin.Model, joint_id: int) -> str:
+    """Name of the joint's first child link, or of the joint if it has none."""
+    for frame in model.frames:
+        if frame.type == pin.FrameType.BODY and frame.parentJoint == joint_id:
+            return frame.name
+    return model.names[joint_id]
+
+
+def _joint_type_and_axis(joint: pin.JointModel) -> tuple[mujoco.mjtJoint, np.ndarray]:
+    name = joint.shortname()
+    if name not in _JOINT_TYPES:
+        raise ValueError(
+            f"unsupported joint type {name}: only revolute and prismatic joints of a fixed-base model"
+        )
+    joint_type, axis = _JOINT_TYPES[name]
+    return joint_type, np.array(joint.extract().axis if axis is None else axis)
+
+
+def _set_inertial(body: mujoco.MjsBody, inertia: pin.Inertia) -> None:
+    rot = inertia.inertia
+    if np.linalg.eigvalsh(rot)[0] < _INERTIA_EPS:
+        rot = rot + _INERTIA_EPS * np.eye(3)
+    body.mass = max(inertia.mass, _INERTIA_EPS)
+    body.ipos = inertia.lever
+    body.fullinertia = [rot[0, 0], rot[1, 1], rot[2, 2], rot[0, 1], rot[0, 2], rot[1, 2]]
+    body.explicitinertial = True
+
+
+def _add_payload(model: pin.Model, bodies: list[mujoco.MjsBody], payload: Payload, name: str) -> None:
+    if not model.existFrame(payload.frame):
+        raise ValueError(f"payload frame {payload.frame!r} is not in the model")
+    frame = model.frames[model.getFrameId(payload.frame)]
+    pos, quat = _pos_quat(frame.placement)
+    # Welded bodies may be point masses: only moving bodies need a positive inertia.
+    bodies[frame.parentJoint].add_body(
+        name=name,
+        pos=pos,
+        quat=quat,
+        mass=payload.mass,
+        ipos=payload.com,
+        inertia=(0.0, 0.0, 0.0) if payload.inertia is None else payload.inertia,
+        explicitinertial=True,
+    )
+
+
+def _add_capsules(model: pin.Model, bodies: list[mujoco.MjsBody]) -> None:
+    """Capsules from each body origin to its child joints, or to its frames at the tip."""
+    for i, body in enumerate(bodies):
+        tips = [
+            model.jointPlacements[child].translation
+            for child in range(1, model.njoints)
+            if model.parents[child] == i
+        ]
+        if not tips:
+            tips = [
+                f.placement.translation
+                for f in model.frames
+                if f.parentJoint == i and f.type in (pin.FrameType.OP_FRAME, pin.FrameType.BODY)
+            ]
+        for tip in tips:
+            # Segments shorter than the radius would only draw a ball at the body origin.
+            if np.linalg.norm(tip) > _CAPSULE_RADIUS:
+                body.add_geom(
+                    type=mujoco.mjtGeom.mjGEOM_CAPSULE,
+                    fromto=np.concatenate([np.zeros(3), tip]),
+                    size=[_CAPSULE_RADIUS, 0.0, 0.0],
+                    rgba=_CAPSULE_RGBA,
+                    contype=0,
+                    conaffinity=0,
+                )
+
+
+def _add_geometry(spec: mujoco.MjSpec, geometry: pin.GeometryModel, bodies: list[mujoco.MjsBody]) -> None:
+    """Primitives and STL/OBJ meshes of a Pinocchio geometry model, as non-colliding geoms."""
+    for obj in geometry.geometryObjects:
+        shape = obj.geometry
+        mesh_path = Path(obj.meshPath) if obj.meshPath else None
+        kwargs: dict[str, object]
+        if isinstance(shape, coal.Box):
+            kwargs = {"type": mujoco.mjtGeom.mjGEOM_BOX, "size": shape.halfSide}
+        elif isinstance(shape, coal.Sphere):
+            kwargs = {"type": mujoco.mjtGeom.mjGEOM_SPHERE, "size": [shape.radius, 0.0, 0.0]}
+        elif isinstance(shape, coal.Cylinder):
+            kwargs = {"type": mujoco.mjtGeom.mjGEOM_CYLINDER, "size": [shape.radius, shape.halfLength, 0.0]}
+        elif isinstance(shape, coal.Capsule):
+            kwargs = {"type": mujoco.mjtGeom.mjGEOM_CAPSULE, "size": [shape.radius, shape.halfLength, 0.0]}
+        elif mesh_path is not None and mesh_path.suffix.lower() in _MESH_SUFFIXES:
+            # The mesh volume is never used for inertia; "shell" also accepts open meshes.
+            spec.add_mesh(
+                name=obj.name,
+                file=str(mesh_path),
+                scale=obj.meshScale,
+                inertia=mujoco.mjtMeshInertia.mjMESH_INERTIA_SHELL,
+            )
+            kwargs = {"type": mujoco.mjtGeom.mjGEOM_MESH, "meshname": obj.name}
+        else:
+            continue
+        pos, quat = _pos_quat(obj.placement)
+        bodies[obj.parentJoint].add_geom(
+            name=obj.name, pos=pos, quat=quat, rgba=obj.meshColor, contype=0, conaffinity=0, **kwargs
+        )
+
+
+def _check_joint_order(model: pin.Model, mj_model: mujoco.MjModel) -> None:
+    """MuJoCo numbers dofs depth-first; Pinocchio models built by hand need not."""
+    for i in range(1, model.njoints):
+        if mj_model.joint(model.names[i]).qposadr[0] != model.joints[i].idx_q:
+            raise ValueError(
+                f"joint {model.names[i]!r}: Pinocchio joints are not in depth-first order, "
+                "MuJoCo's qpos would not follow idx_q"
+            )

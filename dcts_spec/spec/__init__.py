@@ -1,0 +1,7 @@
+"""The spec language: pydantic models, located YAML loading, JSON Schema."""
+
+from .document import Spec
+from .errors import Diagnostic, SpecError
+from .loader import load_spec, load_spec_text
+
+__all__ = ["Diagnostic", "Spec", "SpecError", "load_spec", "load_spec_text"]

@@ -1,0 +1,69 @@
+"""Diagnostics with file locations, and the exception that carries them."""
+
+from __future__ import annotations
+
+import difflib
+from dataclasses import dataclass, field
+from typing import Literal
+
+Severity = Literal["error", "warning", "info"]
+KeyPath = tuple[str | int, ...]
+
+
+def format_path(path: KeyPath) -> str:
+    """`('tasks', 0, 'gains')` -> `tasks[0].gains`."""
+    out = ""
+    for part in path:
+        out += f"[{part}]" if isinstance(part, int) else (f".{part}" if out else str(part))
+    return out or "<document>"
+
+
+@dataclass(frozen=True)
+class Diagnostic:
+    """One finding about a spec, located in its file."""
+
+    message: str
+    severity: Severity = "error"
+    file: str = "<spec>"
+    line: int | None = None  # 1-based
+    column: int | None = None  # 1-based
+    path: KeyPath = ()
+
+    def __str__(self) -> str:
+        where = self.file
+        if self.line is not None:
+            where += f":{self.line}"
+            if self.column is not None:
+                where += f":{self.column}"
+        key = f"{format_path(self.path)}: " if self.path else ""
+        return f"{where}: {self.severity}: {key}{self.message}"
+
+    def to_dict(self) -> dict:
+        return {
+            "severity": self.severity,
+            "file": self.file,
+            "line": self.line,
+            "column": self.column,
+            "path": format_path(self.path) if self.path else None,
+            "message": self.message,
+        }
+
+
+@dataclass
+class SpecError(Exception):
+    """A spec that cannot be used; carries every problem found, not just the first."""
+
+    diagnostics: list[Diagnostic] = field(default_factory=list)
+
+    def __str__(self) -> str:
+        return "\n".join(str(d) for d in self.diagnostics)
+
+    @property
+    def errors(self) -> list[Diagnostic]:
+        return [d for d in self.diagnostics if d.severity == "error"]
+
+
+def did_you_mean(word: str, choices: list[str], n: int = 1) -> str:
+    """` (did you mean 'x'?)` for the closest choices, or an empty string."""
+    close = difflib.get_close_matches(word, choices, n=n, cutoff=0.5)
+    return f" (did you mean {' or '.join(repr(c) for c in close)}?)" if close else ""

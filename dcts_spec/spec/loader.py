@@ -1,0 +1,178 @@
+"""Load a spec file: YAML with locations, then the pydantic models, with every error located."""
+
+from __future__ import annotations
+
+import re
+import types
+import typing
+from pathlib import Path
+from typing import Any
+
+from pydantic import BaseModel, ValidationError
+
+from .document import Spec
+from .errors import Diagnostic, KeyPath, SpecError, did_you_mean
+from .source import SourceMap, read_yaml, read_yaml_file
+from .types import FieldError
+
+
+def load_spec(path: str | Path) -> Spec:
+    """Read and check the structure of a spec file; raises SpecError listing every problem."""
+    data, source = read_yaml_file(path)
+    return spec_from_data(data, source)
+
+
+def load_spec_text(text: str, file: str = "<text>") -> Spec:
+    """Like `load_spec`, from YAML text."""
+    data, source = read_yaml(text, file)
+    return spec_from_data(data, source)
+
+
+def spec_from_data(data: dict[str, Any], source: SourceMap) -> Spec:
+    try:
+        spec = Spec.model_validate(data)
+    except ValidationError as exc:
+        raise SpecError(_diagnostics(exc, data, source)) from None
+    spec._source = source
+    return spec
+
+
+def _diagnostics(exc: ValidationError, data: Any, source: SourceMap) -> list[Diagnostic]:
+    found: dict[KeyPath, tuple[int, Diagnostic]] = {}
+    for error in exc.errors(include_url=False):
+        path, rest = _data_path(data, error["loc"])
+        blamed = error.get("ctx", {}).get("error")
+        if isinstance(blamed, FieldError) and isinstance(_value_at(data, path), dict) and blamed.key in _value_at(data, path):
+            path = path + (blamed.key,)
+        key = path + rest if error["type"] in ("missing", "extra_forbidden") else path
+        rank = _GENERIC_RANK.get(error["type"], 0)
+        # A union reports one error per alternative; keep the most specific one.
+        if key not in found or rank < found[key][0]:
+            found[key] = (rank, source.diagnostic(path, _message(error, path, rest, data)))
+    return sorted((d for _, d in found.values()), key=lambda d: (d.line or 0, d.column or 0))
+
+
+# How generic an error type is: a union alternative's type mismatch says less than the others.
+_GENERIC_RANK = {"literal_error": 1, "model_type": 2, "dict_type": 2, "model_attributes_type": 2, "list_type": 2}
+
+
+def _data_path(data: Any, loc: tuple) -> tuple[KeyPath, tuple]:
+    """Split a pydantic location into the part that exists in the data and the rest.
+
+    Location parts that are not keys of the data (names of union alternatives) are dropped.
+    """
+    path: list[str | int] = []
+    current = data
+    for i, part in enumerate(loc):
+        if isinstance(current, dict) and part in current:
+            current = current[part]
+            path.append(part)
+        elif isinstance(current, list) and isinstance(part, int) and 0 <= part < len(current):
+            current = current[part]
+            path.append(part)
+        elif i == len(loc) - 1:
+            return tuple(path), (part,)
+    return tuple(path), ()
+
+
+def _value_at(data: Any, path: KeyPath) -> Any:
+    for part in path:
+        data = data[part]
+    return data
+
+
+def _message(error: dict, path: KeyPath, rest: tuple, data: Any) -> str:
+    kind = error["type"]
+    if kind == "extra_forbidden":
+        key = rest[0] if rest else path[-1]
+        parent = path if rest else path[:-1]
+        allowed = _allowed_keys(parent, data)
+        hint = did_you_mean(str(key), allowed)
+        return f"unknown key {key!r}{hint}; allowed keys: {', '.join(allowed)}" if allowed else f"unknown key {key!r}"
+    if kind == "missing":
+        return f"missing required key {rest[0]!r}" if rest else "missing required value"
+    if kind == "literal_error":
+        allowed = re.findall(r"'([^']*)'", error["ctx"]["expected"])
+        got = error["input"]
+        return f"{got!r} is not allowed{did_you_mean(str(got), allowed)}; allowed: {', '.join(allowed)}"
+    if kind == "union_tag_invalid":
+        allowed = re.findall(r"'([^']*)'", error["ctx"]["expected_tags"])
+        got = error["ctx"]["tag"]
+        return f"unknown type {got!r}{did_you_mean(str(got), allowed)}; allowed: {', '.join(allowed)}"
+    if kind == "union_tag_not_found":
+        return f"missing key {error['ctx']['discriminator']!r} (what kind of entry this is)"
+    if kind in ("model_type", "dict_type", "model_attributes_type"):
+        return f"expected a mapping of keys, got {_describe(error['input'])}"
+    if kind == "list_type":
+        return f"expected a list, got {_describe(error['input'])}"
+    if kind == "string_pattern_mismatch":
+        return f"{error['input']!r} is not an identifier (letters, digits and _, not starting with a digit)"
+    if kind == "string_type":
+        return f"expected text, got {_describe(error['input'])}"
+    message = error["msg"]
+    for prefix in ("Value error, ", "Assertion failed, "):
+        message = message.removeprefix(prefix)
+    return message
+
+
+def _describe(value: Any) -> str:
+    if isinstance(value, dict):
+        return "a mapping"
+    if isinstance(value, list):
+        return "a list"
+    if value is None:
+        return "nothing (an empty value)"
+    return repr(value)
+
+
+def _allowed_keys(path: KeyPath, data: Any) -> list[str]:
+    """Keys the spec model accepts at `path` (found by walking the model classes)."""
+    model = _model_at(Spec, path, data)
+    return list(model.model_fields) if model is not None else []
+
+
+def _model_at(annotation: Any, path: KeyPath, data: Any) -> type[BaseModel] | None:
+    current = annotation
+    node = data
+    for part in (*path, None):
+        current = _unwrap(current, node)
+        if part is None:
+            break
+        if isinstance(current, type) and issubclass(current, BaseModel):
+            field = current.model_fields.get(str(part))
+            if field is None:
+                return None
+            current = field.annotation
+        else:
+            origin = typing.get_origin(current)
+            args = typing.get_args(current)
+            if origin in (list, tuple) and args:
+                current = args[0]
+            elif origin is dict and args:
+                current = args[1]
+            else:
+                return None
+        node = node[part] if isinstance(node, (dict, list)) else None
+    return current if isinstance(current, type) and issubclass(current, BaseModel) else None
+
+
+def _unwrap(annotation: Any, node: Any) -> Any:
+    """Strip Annotated/Optional; pick the union member that fits the data (by its `type` tag)."""
+    while True:
+        origin = typing.get_origin(annotation)
+        if origin is typing.Annotated:
+            annotation = typing.get_args(annotation)[0]
+            continue
+        if origin in (typing.Union, types.UnionType):
+            members = [a for a in typing.get_args(annotation) if a is not type(None)]
+            models = [m for m in members if isinstance(m, type) and issubclass(m, BaseModel)]
+            tag = node.get("type") if isinstance(node, dict) else None
+            tagged = [m for m in models if "type" in m.model_fields and tag in typing.get_args(m.model_fields["type"].annotation)]
+            if tagged:
+                annotation = tagged[0]
+            elif models and isinstance(node, dict):
+                annotation = models[0]
+            else:
+                annotation = members[0]
+            continue
+        return annotation

@@ -1,0 +1,146 @@
+"""The `tasks` list: what the robot should do, by priority."""
+
+from __future__ import annotations
+
+from typing import Literal
+
+from pydantic import Field, model_validator
+
+from .types import FieldError, Number, NumberList, ScalarOrVector, StrictModel, Vec3, size_of
+from .units import AngleUnit
+
+TaskType = Literal["position", "orientation", "pose", "joint"]
+Axis = Literal["x", "y", "z", "rx", "ry", "rz"]
+
+TRANSLATION_AXES: tuple[str, ...] = ("x", "y", "z")
+ROTATION_AXES: tuple[str, ...] = ("rx", "ry", "rz")
+ALLOWED_AXES: dict[str, tuple[str, ...]] = {
+    "position": TRANSLATION_AXES,
+    "orientation": ROTATION_AXES,
+    "pose": TRANSLATION_AXES + ROTATION_AXES,
+}
+REFERENCE_FIELDS: dict[str, tuple[str, ...]] = {
+    "position": ("position",),
+    "orientation": ("rpy",),
+    "pose": ("position", "rpy"),
+    "joint": ("q",),
+}
+
+
+class Gains(StrictModel):
+    """PD gains of the task's error dynamics ẍ_d = kp Δx − kd ẋ (+ feed-forward)."""
+
+    kp: ScalarOrVector = Field(description="stiffness in 1/s², one value or one per task axis")
+    kd: ScalarOrVector = Field(description="damping in 1/s, one value or one per task axis")
+    max_velocity: Number | None = Field(
+        None, gt=0, description="saturate the desired velocity (kp/kd)Δx to this norm (m/s or rad/s)"
+    )
+
+    @model_validator(mode="after")
+    def _non_negative(self) -> "Gains":
+        for name in ("kp", "kd"):
+            value = getattr(self, name)
+            values = value if isinstance(value, tuple) else (value,)
+            if any(v < 0 for v in values):
+                raise FieldError(name, f"{name} must be ≥ 0, got {value}")
+        if self.max_velocity is not None and not self.has_stiffness():
+            raise FieldError("max_velocity", "max_velocity needs kp > 0 (it saturates the velocity (kp/kd)Δx)")
+        return self
+
+    def has_stiffness(self) -> bool:
+        values = self.kp if isinstance(self.kp, tuple) else (self.kp,)
+        return any(v != 0 for v in values)
+
+
+class Reference(StrictModel):
+    """Target of a task: constant (world frame) or a run-time input of the compiled controller."""
+
+    position: Vec3 | None = Field(None, description="target point [x, y, z] in the world, m")
+    rpy: Vec3 | None = Field(None, description="target orientation as roll, pitch, yaw (world)")
+    q: NumberList | None = Field(None, description="target joint positions")
+    unit: AngleUnit = Field("rad", description="unit of rpy or q")
+    input: bool = Field(False, description="the reference is an input of the controller at run time")
+    feedforward: bool = Field(
+        False, description="with input: also take a velocity and an acceleration feed-forward per task axis"
+    )
+
+    def given_fields(self) -> tuple[str, ...]:
+        return tuple(f for f in ("position", "rpy", "q") if getattr(self, f) is not None)
+
+
+class TaskSpec(StrictModel):
+    name: str = Field(pattern=r"^[A-Za-z_][A-Za-z0-9_]*$", description="identifier (letters, digits, _)")
+    type: TaskType
+    frame: str | None = Field(None, description="frame of a Cartesian task")
+    axes: list[Axis] | None = Field(None, description="controlled axes; their number is the task dimension")
+    joints: list[str] | None = Field(None, description="joints of a joint task (default: all)")
+    priority: int = Field(ge=1, description="1 is the highest; tasks may share a level")
+    gains: Gains
+    reference: Reference | None = None
+
+    @model_validator(mode="after")
+    def _consistent(self) -> "TaskSpec":
+        cartesian = self.type != "joint"
+        if cartesian and self.frame is None:
+            raise FieldError("type", f"a {self.type} task needs `frame`")
+        if not cartesian and self.frame is not None:
+            raise FieldError("frame", "a joint task has no `frame`; use `joints` to choose joints")
+        if cartesian and self.joints is not None:
+            raise FieldError("joints", f"`joints` is for joint tasks; a {self.type} task uses `frame` and `axes`")
+        if not cartesian and self.axes is not None:
+            raise FieldError("axes", "`axes` is for Cartesian tasks; a joint task uses `joints`")
+        if self.axes is not None:
+            allowed = ALLOWED_AXES[self.type]
+            wrong = [a for a in self.axes if a not in allowed]
+            if wrong:
+                raise FieldError("axes", f"axes {wrong} not allowed for a {self.type} task; allowed: {list(allowed)}")
+            if len(set(self.axes)) != len(self.axes) or not self.axes:
+                raise FieldError("axes", f"axes must be a non-empty list without repeats, got {self.axes}")
+        if self.joints is not None and (not self.joints or len(set(self.joints)) != len(self.joints)):
+            raise FieldError("joints", f"joints must be a non-empty list without repeats, got {self.joints}")
+        self._check_reference()
+        self._check_gain_sizes()
+        return self
+
+    def _check_reference(self) -> None:
+        needs = REFERENCE_FIELDS[self.type]
+        if self.reference is None:
+            if self.gains.has_stiffness():
+                raise FieldError(
+                    "gains",
+                    f"a task with kp ≠ 0 needs a `reference` ({' and '.join(needs)}, or `input: true`); "
+                    "set kp: 0 for a pure damping task"
+                )
+            return
+        given = self.reference.given_fields()
+        if self.reference.feedforward and not self.reference.input:
+            raise FieldError("reference", "feedforward needs `input: true` (it is read at run time)")
+        if self.reference.input:
+            if given:
+                raise FieldError("reference", f"give either `input: true` or constant values, not both ({given})")
+            return
+        extra = [f for f in given if f not in needs]
+        if extra:
+            raise FieldError("reference", f"field {extra[0]!r} does not fit a {self.type} task; it takes {list(needs)}")
+        missing = [f for f in needs if f not in given]
+        if missing:
+            raise FieldError("reference", f"the reference of a {self.type} task needs {missing} (or `input: true`)")
+
+    def _check_gain_sizes(self) -> None:
+        dim = self.cartesian_dimension
+        if dim is None:
+            return
+        for name in ("kp", "kd"):
+            size = size_of(getattr(self.gains, name))
+            if size is not None and size != dim:
+                raise FieldError("gains", f"{name} has {size} values but the task has {dim} axes {list(self.axis_names)}")
+
+    @property
+    def axis_names(self) -> tuple[str, ...]:
+        """Controlled Cartesian axes in the order written (all axes of the type by default)."""
+        return ALLOWED_AXES[self.type] if self.axes is None else tuple(self.axes)
+
+    @property
+    def cartesian_dimension(self) -> int | None:
+        """Task dimension of a Cartesian task; None for joint tasks (it depends on the robot)."""
+        return None if self.type == "joint" else len(self.axis_names)

@@ -1,0 +1,47 @@
+"""Joint task: a posture, or pure joint damping when kp = 0."""
+
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+
+from ..symbolic import SymbolicRobot
+from .base import Task
+
+
+class JointTask(Task):
+    """Selected joints driven to q_d (or only damped): J is a selection matrix, J̇q̇ = 0."""
+
+    def __init__(self, name: str, priority: int, joint_indices: list[int], joint_names: list[str], nv: int,
+                 q: np.ndarray | None = None, **kwargs):
+        super().__init__(name, priority, **kwargs)
+        self.joint_indices = list(joint_indices)
+        self.joint_names = list(joint_names)
+        self.nv = nv
+        self.q = None if q is None else np.asarray(q, dtype=float)
+
+    @property
+    def dim(self) -> int:
+        return len(self.joint_indices)
+
+    @property
+    def row_names(self) -> tuple[str, ...]:
+        return tuple(f"{self.name}.{j}" for j in self.joint_names)
+
+    def reference_fields(self):
+        return [("q", self.dim, "rad", tuple(self.joint_names))]
+
+    def constant_reference(self) -> dict[str, np.ndarray]:
+        return {} if self.q is None else {"q": self.q}
+
+    def selection_matrix(self) -> np.ndarray:
+        """J: picks the task's joints out of q̇."""
+        selection = np.zeros((self.dim, self.nv))
+        selection[np.arange(self.dim), self.joint_indices] = 1.0
+        return selection
+
+    def _terms(self, robot: SymbolicRobot, reference: dict[str, ca.SX]) -> tuple[ca.SX, ca.SX, ca.SX]:
+        jacobian = ca.SX(ca.DM(self.selection_matrix()))
+        q = robot.q[self.joint_indices]
+        error = reference["q"] - q if "q" in reference else ca.SX.zeros(self.dim)
+        return jacobian, ca.SX.zeros(self.dim), error

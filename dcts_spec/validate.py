@@ -1,0 +1,278 @@
+"""Semantic validation of a spec against its robot, and the summary `dcts validate` prints."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+
+from .robot.model import Robot
+from .robot.resolve import resolve_robot
+from .spec import Diagnostic, Spec, SpecError, load_spec
+from .spec.errors import did_you_mean
+from .spec.types import size_of
+from .spec.units import to_si
+from .tasks import CartesianTask, JointTask, make_task, task_dimension, task_joints
+
+RANK_TOLERANCE = 1e-6
+
+
+@dataclass
+class LevelReport:
+    """One priority level at the initial configuration."""
+
+    priority: int
+    tasks: list[tuple[str, str, int]]  # name, type, dimension
+    dimension: int
+    rank: int  # new directions this level controls beyond the higher levels
+    free_before: int  # joint-space freedom left by the higher levels
+
+    @property
+    def over_constrained(self) -> bool:
+        return self.rank < self.dimension
+
+
+@dataclass
+class ValidationReport:
+    """What `dcts validate` found: the resolved robot, the levels, and every diagnostic."""
+
+    spec: Spec
+    robot: Robot
+    initial_q: np.ndarray
+    levels: list[LevelReport]
+    gravity_torque: np.ndarray  # g(q0)
+    diagnostics: list[Diagnostic] = field(default_factory=list)
+
+    @property
+    def file(self) -> str:
+        return self.spec.source.file
+
+    def to_dict(self) -> dict:
+        lim = self.robot.limits
+
+        def finite(a: np.ndarray) -> list[float | None]:
+            return [float(v) if np.isfinite(v) else None for v in a]
+
+        return {
+            "file": self.file,
+            "valid": True,
+            "name": self.spec.name,
+            "robot": {"name": self.robot.name, "urdf": str(self.robot.urdf_path), "dof": self.robot.nv,
+                      "joints": self.robot.joint_names},
+            "formulation": self.spec.controller.formulation,
+            "levels": [
+                {"priority": lv.priority, "dimension": lv.dimension, "rank": lv.rank, "free_before": lv.free_before,
+                 "tasks": [{"name": n, "type": t, "dimension": d} for n, t, d in lv.tasks]}
+                for lv in self.levels
+            ],
+            "limits": {
+                "q_min": finite(lim.q_min), "q_max": finite(lim.q_max), "v_max": finite(lim.v_max),
+                "a_max": finite(lim.a_max), "tau_max": finite(lim.tau_max),
+                "cartesian": [{"frame": b.frame, "axis": "xyz"[b.axis], "min": b.c_min if np.isfinite(b.c_min) else None,
+                               "max": b.c_max if np.isfinite(b.c_max) else None} for b in self.robot.cartesian_bounds],
+            },
+            "gravity_torque_ratio": float(np.max(np.abs(self.gravity_torque) / lim.tau_max)),
+            "diagnostics": [d.to_dict() for d in self.diagnostics],
+        }
+
+    def summary(self) -> str:
+        """A few lines a person reads: robot, tasks by priority, limits, warnings."""
+        spec, robot, lim = self.spec, self.robot, self.robot.limits
+        lines = [
+            f"{self.file}: ok — {spec.name}",
+            f"  robot       {robot.name} ({robot.nv} DOF: {', '.join(robot.joint_names)})",
+            f"  controller  {spec.controller.formulation}, solver {spec.controller.solver}, "
+            f"period {spec.controller.period * 1e3:g} ms, external torque {spec.controller.external_torque}",
+        ]
+        for lv in self.levels:
+            tasks = ", ".join(f"{n} ({t}, {d})" for n, t, d in lv.tasks)
+            lines.append(f"  priority {lv.priority}  dim {lv.dimension}, rank {lv.rank} of {lv.free_before} free: {tasks}")
+
+        def fmt(a: np.ndarray, scale: float = 1.0) -> str:
+            return "[" + ", ".join("∞" if not np.isfinite(v) else f"{v * scale:.4g}" for v in a) + "]"
+
+        deg = 180.0 / np.pi
+        lines.append(f"  limits      q ∈ {fmt(lim.q_min, deg)} .. {fmt(lim.q_max, deg)} deg")
+        lines.append(f"              |q̇| ≤ {fmt(lim.v_max, deg)} deg/s, |τ| ≤ {fmt(lim.tau_max)} Nm")
+        if np.isfinite(lim.a_max).any():
+            lines.append(f"              |q̈| ≤ {fmt(lim.a_max, deg)} deg/s²")
+        for b in robot.cartesian_bounds:
+            lines.append(f"              {b.c_min:.4g} ≤ {b.frame}.{'xyz'[b.axis]} ≤ {b.c_max:.4g} m")
+        ratio = np.abs(self.gravity_torque) / lim.tau_max
+        lines.append(f"  gravity     needs {np.max(ratio) * 100:.0f}% of the torque limit at the initial configuration")
+        lines.extend(f"  {d}" for d in self.diagnostics)
+        return "\n".join(lines)
+
+
+def validate_file(path: str | Path) -> ValidationReport:
+    """Load and validate a spec file; raises SpecError listing every problem."""
+    return validate_spec(load_spec(path))
+
+
+def validate_spec(spec: Spec) -> ValidationReport:
+    """Check a structurally valid spec against its robot; raises SpecError on errors."""
+    robot, diags = resolve_robot(spec)
+    diags += _check_tasks(spec, robot)
+    diags += _check_controller(spec, robot)
+    diags += _check_scenario(spec, robot)
+    if any(d.severity == "error" for d in diags):
+        raise SpecError(diags)
+    q0 = initial_configuration(spec, robot)
+    levels, level_diags = _levels(spec, robot, q0)
+    diags += level_diags
+    gravity = pin.computeGeneralizedGravity(robot.model, robot.model.createData(), q0)
+    over = np.flatnonzero(np.abs(gravity) > robot.limits.tau_max)
+    if over.size:
+        j = over[0]
+        diags.append(
+            spec.source.diagnostic(
+                ("limits", "joint_torque") if spec.limits.joint_torque else ("robot",),
+                f"the torque limits cannot hold the robot against gravity at the initial configuration "
+                f"(joint {j + 1} needs {abs(gravity[j]):.1f} Nm, limit {robot.limits.tau_max[j]:.1f} Nm)",
+                "warning",
+            )
+        )
+    return ValidationReport(spec, robot, q0, levels, gravity, diags)
+
+
+def initial_configuration(spec: Spec, robot: Robot) -> np.ndarray:
+    """The scenario's initial q, or the middle of the joint range."""
+    if spec.scenario is not None and spec.scenario.initial_q is not None:
+        return np.array(to_si(list(spec.scenario.initial_q), spec.scenario.unit))
+    return robot.neutral_configuration()
+
+
+def _check_tasks(spec: Spec, robot: Robot) -> list[Diagnostic]:
+    src, diags = spec.source, []
+    seen: dict[str, int] = {}
+    frames = [f.name for f in robot.model.frames]
+    for i, task in enumerate(spec.tasks):
+        at = ("tasks", i)
+        if task.name in seen:
+            diags.append(src.diagnostic(at + ("name",), f"task name {task.name!r} is already used by tasks[{seen[task.name]}]"))
+        seen.setdefault(task.name, i)
+        if task.frame is not None and not robot.has_frame(task.frame):
+            diags.append(src.diagnostic(at + ("frame",), f"no frame {task.frame!r} in the robot{did_you_mean(task.frame, frames, 3)}"))
+        if task.type != "joint":
+            continue
+        unknown = [j for j in task_joints(task, robot) if j not in robot.joint_names]
+        for j in unknown:
+            diags.append(src.diagnostic(at + ("joints",), f"no joint {j!r}{did_you_mean(j, robot.joint_names, 3)}; joints: {', '.join(robot.joint_names)}"))
+        if unknown:
+            continue
+        dim = task_dimension(task, robot)
+        for name in ("kp", "kd"):
+            size = size_of(getattr(task.gains, name))
+            if size is not None and size != dim:
+                diags.append(src.diagnostic(at + ("gains", name), f"{size} values for a joint task of {dim} joints"))
+        if task.reference is not None and task.reference.q is not None and len(task.reference.q) != dim:
+            diags.append(src.diagnostic(at + ("reference", "q"), f"{len(task.reference.q)} values for a joint task of {dim} joints"))
+    return diags
+
+
+def _check_controller(spec: Spec, robot: Robot) -> list[Diagnostic]:
+    src, ctl, diags = spec.source, spec.controller, []
+    n_levels = len(spec.priority_levels)
+    if ctl.priority_weights is not None and len(ctl.priority_weights) != n_levels:
+        diags.append(src.diagnostic(("controller", "priority_weights"),
+                                    f"{len(ctl.priority_weights)} weights for {n_levels} priority levels"))
+    for name in ("joint_damping", "fallback_damping"):
+        size = size_of(getattr(ctl, name))
+        if size is not None and size != robot.nv:
+            diags.append(src.diagnostic(("controller", name), f"{size} values for {robot.nv} joints"))
+    return diags
+
+
+def _check_scenario(spec: Spec, robot: Robot) -> list[Diagnostic]:
+    sc, src, n, diags = spec.scenario, spec.source, robot.nv, []
+    if sc is None:
+        return diags
+    at = ("scenario",)
+    for name in ("initial_q", "initial_dq"):
+        value = getattr(sc, name)
+        if value is not None and len(value) != n:
+            diags.append(src.diagnostic(at + (name,), f"{len(value)} values for {n} joints"))
+    if sc.initial_q is not None and len(sc.initial_q) == n:
+        q0 = np.array(to_si(list(sc.initial_q), sc.unit))
+        outside = np.flatnonzero((q0 < robot.limits.q_min) | (q0 > robot.limits.q_max))
+        if outside.size:
+            diags.append(src.diagnostic(at + ("initial_q",), f"joints {[int(j) + 1 for j in outside]} start outside their position limits"))
+    frames = [f.name for f in robot.model.frames]
+    for i, d in enumerate(sc.disturbances):
+        where = at + ("disturbances", i)
+        if d.type == "force":
+            if not robot.has_frame(d.body):
+                diags.append(src.diagnostic(where + ("body",), f"no link or frame {d.body!r}{did_you_mean(d.body, frames, 3)}"))
+        elif len(d.torque) != n:
+            diags.append(src.diagnostic(where + ("torque",), f"{len(d.torque)} values for {n} joints"))
+    for i, p in enumerate(sc.payloads):
+        if not robot.has_frame(p.frame):
+            diags.append(src.diagnostic(at + ("payloads", i, "frame"), f"no frame {p.frame!r}{did_you_mean(p.frame, frames, 3)}"))
+    sensing = sc.sensing
+    for name in ("noise_std", "bias"):
+        size = size_of(getattr(sensing, name))
+        if size is not None and size != n:
+            diags.append(src.diagnostic(at + ("external_torque", name), f"{size} values for {n} joints"))
+    if (wp := sc.waypoints) is not None:
+        diags += _check_waypoints(spec, robot)
+    return diags
+
+
+def _check_waypoints(spec: Spec, robot: Robot) -> list[Diagnostic]:
+    wp, src = spec.scenario.waypoints, spec.source  # type: ignore[union-attr]
+    at = ("scenario", "waypoints")
+    names = [t.name for t in spec.tasks]
+    if wp.task not in names:
+        return [src.diagnostic(at + ("task",), f"no task {wp.task!r}{did_you_mean(wp.task, names)}; tasks: {', '.join(names)}")]
+    task = spec.tasks[names.index(wp.task)]
+    if task.reference is None or not task.reference.input:
+        return [src.diagnostic(at + ("task",), f"task {wp.task!r} needs `reference: {{input: true}}` to follow waypoints")]
+    size = sum(f[1] for f in make_task(task, robot).reference_fields())
+    return [
+        src.diagnostic(at + ("points", i), f"{len(p)} values, but task {wp.task!r} takes a reference of {size}")
+        for i, p in enumerate(wp.points)
+        if len(p) != size
+    ]
+
+
+def _levels(spec: Spec, robot: Robot, q: np.ndarray) -> tuple[list[LevelReport], list[Diagnostic]]:
+    """Dimension and rank of each priority level at q, with warnings for conflicts and singularities."""
+    model = robot.model
+    data = model.createData()
+    pin.computeJointJacobians(model, data, q)
+    pin.updateFramePlacements(model, data)
+    levels, diags = [], []
+    stacked = np.zeros((0, robot.nv))
+    priorities = spec.priority_levels
+    for p in priorities:
+        rows, entries = [], []
+        for task_spec in spec.tasks_at(p):
+            task = make_task(task_spec, robot)
+            J = _numeric_jacobian(task, model, data)
+            entries.append((task.name, task_spec.type, task.dim))
+            rows.append(J)
+            if np.linalg.matrix_rank(J, RANK_TOLERANCE) < task.dim:
+                i = spec.tasks.index(task_spec)
+                diags.append(spec.source.diagnostic(("tasks", i), f"task {task.name!r} is singular at the initial configuration (rank {np.linalg.matrix_rank(J, RANK_TOLERANCE)} < {task.dim})", "warning"))
+        J_level = np.vstack(rows)
+        before = np.linalg.matrix_rank(stacked, RANK_TOLERANCE) if stacked.size else 0
+        stacked = np.vstack([stacked, J_level])
+        after = np.linalg.matrix_rank(stacked, RANK_TOLERANCE)
+        level = LevelReport(p, entries, J_level.shape[0], after - before, robot.nv - before)
+        levels.append(level)
+        if level.over_constrained and p != priorities[-1]:
+            i = spec.tasks.index(spec.tasks_at(p)[0])
+            diags.append(spec.source.diagnostic(
+                ("tasks", i, "priority"),
+                f"priority {p} asks for {level.dimension} directions but only {level.rank} are free of higher priorities "
+                "at the initial configuration; only the lowest priority may be over-constrained", "warning"))
+    return levels, diags
+
+
+def _numeric_jacobian(task: CartesianTask | JointTask, model: pin.Model, data: pin.Data) -> np.ndarray:
+    if isinstance(task, CartesianTask):
+        J = pin.getFrameJacobian(model, data, model.getFrameId(task.frame), pin.LOCAL_WORLD_ALIGNED)
+        return J[task.rows, :]
+    return task.selection_matrix()
