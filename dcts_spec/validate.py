@@ -257,9 +257,10 @@ def _levels(spec: Spec, robot: Robot, q: np.ndarray) -> tuple[list[LevelReport],
                 i = spec.tasks.index(task_spec)
                 diags.append(spec.source.diagnostic(("tasks", i), f"task {task.name!r} is singular at the initial configuration (rank {np.linalg.matrix_rank(J, RANK_TOLERANCE)} < {task.dim})", "warning"))
         J_level = np.vstack(rows)
-        before = np.linalg.matrix_rank(stacked, RANK_TOLERANCE) if stacked.size else 0
+        # Plain ints: numpy's would not survive `--json` (json.dumps rejects numpy.int64).
+        before = int(np.linalg.matrix_rank(stacked, RANK_TOLERANCE)) if stacked.size else 0
         stacked = np.vstack([stacked, J_level])
-        after = np.linalg.matrix_rank(stacked, RANK_TOLERANCE)
+        after = int(np.linalg.matrix_rank(stacked, RANK_TOLERANCE))
         level = LevelReport(p, entries, J_level.shape[0], after - before, robot.nv - before)
         levels.append(level)
         if level.over_constrained and p != priorities[-1]:

@@ -49,7 +49,13 @@ def _diagnostics(exc: ValidationError, data: Any, source: SourceMap) -> list[Dia
         # A union reports one error per alternative; keep the most specific one.
         if key not in found or rank < found[key][0]:
             found[key] = (rank, source.diagnostic(path, _message(error, path, rest, data)))
-    return sorted((d for _, d in found.values()), key=lambda d: (d.line or 0, d.column or 0))
+    # A type mismatch of one alternative says nothing when another alternative found problems inside the
+    # value (`external_torque: {mode: noisey}` is not the literal `ideal`, but the useful error is about `mode`).
+    kept = [
+        d for key, (rank, d) in found.items()
+        if rank == 0 or not any(len(other) > len(key) and other[: len(key)] == key for other in found)
+    ]
+    return sorted(kept, key=lambda d: (d.line or 0, d.column or 0))
 
 
 # How generic an error type is: a union alternative's type mismatch says less than the others.
@@ -59,18 +65,23 @@ _GENERIC_RANK = {"literal_error": 1, "model_type": 2, "dict_type": 2, "model_att
 def _data_path(data: Any, loc: tuple) -> tuple[KeyPath, tuple]:
     """Split a pydantic location into the part that exists in the data and the rest.
 
-    Location parts that are not keys of the data (names of union alternatives) are dropped.
+    Location parts that are not keys of the data (names of union alternatives) are dropped, and so is
+    the tag of a discriminated union (the entry's `type`), even when the entry also has a key of that
+    name (`{type: force, force: [...]}`).
     """
     path: list[str | int] = []
     current = data
+    last = len(loc) - 1
     for i, part in enumerate(loc):
+        if isinstance(current, dict) and i < last and current.get("type") == part:
+            continue
         if isinstance(current, dict) and part in current:
             current = current[part]
             path.append(part)
         elif isinstance(current, list) and isinstance(part, int) and 0 <= part < len(current):
             current = current[part]
             path.append(part)
-        elif i == len(loc) - 1:
+        elif i == last:
             return tuple(path), (part,)
     return tuple(path), ()
 
@@ -92,15 +103,19 @@ def _message(error: dict, path: KeyPath, rest: tuple, data: Any) -> str:
     if kind == "missing":
         return f"missing required key {rest[0]!r}" if rest else "missing required value"
     if kind == "literal_error":
-        allowed = re.findall(r"'([^']*)'", error["ctx"]["expected"])
+        # `expected` reads "'a', 'b' or 'c'" for text and "1 or 2" for numbers.
+        allowed = [text or number for text, number in re.findall(r"'([^']*)'|(-?\d+)", error["ctx"]["expected"])]
         got = error["input"]
+        if isinstance(got, str) and got in allowed:  # `version: "1"`
+            return f"expected the number {got}, got the text {got!r} (remove the quotes)"
         return f"{got!r} is not allowed{did_you_mean(str(got), allowed)}; allowed: {', '.join(allowed)}"
     if kind == "union_tag_invalid":
         allowed = re.findall(r"'([^']*)'", error["ctx"]["expected_tags"])
         got = error["ctx"]["tag"]
         return f"unknown type {got!r}{did_you_mean(str(got), allowed)}; allowed: {', '.join(allowed)}"
     if kind == "union_tag_not_found":
-        return f"missing key {error['ctx']['discriminator']!r} (what kind of entry this is)"
+        tag_key = error["ctx"]["discriminator"].strip("'")  # pydantic quotes it: "'type'"
+        return f"missing key {tag_key!r} (what kind of entry this is)"
     if kind in ("model_type", "dict_type", "model_attributes_type"):
         return f"expected a mapping of keys, got {_describe(error['input'])}"
     if kind == "list_type":
@@ -109,10 +124,24 @@ def _message(error: dict, path: KeyPath, rest: tuple, data: Any) -> str:
         return f"{error['input']!r} is not an identifier (letters, digits and _, not starting with a digit)"
     if kind == "string_type":
         return f"expected text, got {_describe(error['input'])}"
+    if kind in ("float_type", "float_parsing"):
+        return f"expected a number, got {_describe(error['input'])}"
+    if kind == "finite_number":
+        return f"expected a finite number, got {_describe(error['input'])}"
+    if kind in ("int_type", "int_parsing", "int_from_float"):
+        return f"expected a whole number, got {_describe(error['input'])}"
+    if kind in _BOUNDS:
+        symbol, bound = _BOUNDS[kind]
+        return f"must be {symbol} {error['ctx'][bound]:g}, got {_describe(error['input'])}"
+    if kind == "too_short" and error["ctx"].get("min_length") == 1:
+        return "expected at least one entry, got an empty list"
     message = error["msg"]
     for prefix in ("Value error, ", "Assertion failed, "):
         message = message.removeprefix(prefix)
     return message
+
+
+_BOUNDS = {"greater_than": (">", "gt"), "greater_than_equal": ("≥", "ge"), "less_than": ("<", "lt"), "less_than_equal": ("≤", "le")}
 
 
 def _describe(value: Any) -> str:

@@ -6,7 +6,7 @@ from typing import Annotated, Literal
 
 from pydantic import Field, model_validator
 
-from .types import Number, NumberList, ScalarOrVector, StrictModel, Vec3
+from .types import Integer, Number, NumberList, ScalarOrVector, StrictModel, Vec3
 from .units import AngleUnit
 
 
@@ -58,7 +58,7 @@ class ExternalTorqueSensing(StrictModel):
     mode: Literal["ideal", "ignored", "noisy"] = "ideal"
     noise_std: ScalarOrVector = Field(0.0, description="Gaussian noise, Nm")
     bias: ScalarOrVector = Field(0.0, description="constant offset, Nm")
-    seed: int = 0
+    seed: Integer = 0
 
 
 class ModelMismatch(StrictModel):
@@ -77,7 +77,7 @@ class ScenarioSpec(StrictModel):
     waypoints: Waypoints | None = None
     external_torque: ExternalTorqueSensing | Literal["ideal", "ignored", "noisy"] = "ideal"
     model_mismatch: ModelMismatch | None = None
-    substeps: int = Field(1, ge=1, description="simulation steps per control period (the step is period/substeps)")
+    substeps: Integer = Field(1, ge=1, description="simulation steps per control period (the step is period/substeps)")
     integrator: Literal["euler", "implicitfast", "implicit", "rk4"] = "implicitfast"
 
     @property

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -9,6 +10,17 @@ from typing import Any
 import yaml
 
 from .errors import Diagnostic, KeyPath, SpecError
+
+
+class _Loader(yaml.SafeLoader):
+    """The safe loader, also reading `1e6` and `1.0e-3` as numbers (YAML 1.2; YAML 1.1 wants `1.0e+6`)."""
+
+
+_Loader.add_implicit_resolver(
+    "tag:yaml.org,2002:float",
+    re.compile(r"^[-+]?[0-9][0-9_]*(?:\.[0-9_]*)?[eE][-+]?[0-9]+$"),
+    list("-+0123456789"),
+)
 
 
 @dataclass
@@ -37,8 +49,12 @@ def _construct(node: yaml.Node, path: KeyPath, source: SourceMap, errors: list[D
     if isinstance(node, yaml.MappingNode):
         out: dict[str, Any] = {}
         for key_node, value_node in node.value:
-            key = _scalar(key_node)
             where = (key_node.start_mark.line + 1, key_node.start_mark.column + 1)
+            if key_node.tag == "tag:yaml.org,2002:merge":
+                message = "YAML merge keys (`<<`) are not supported; write the keys out"
+                errors.append(Diagnostic(message, "error", source.file, *where, path))
+                continue
+            key = _scalar(key_node)
             if not isinstance(key, str):
                 errors.append(Diagnostic(f"keys must be text, got {key!r}", "error", source.file, *where, path))
                 continue
@@ -62,7 +78,7 @@ def read_yaml(text: str, file: str) -> tuple[Any, SourceMap]:
     """Parse YAML text into plain data and a source map; syntax errors become located diagnostics."""
     source = SourceMap(file)
     try:
-        node = yaml.compose(text, Loader=yaml.SafeLoader)
+        node = yaml.compose(text, Loader=_Loader)
     except yaml.MarkedYAMLError as exc:
         mark = exc.problem_mark or exc.context_mark
         problem = " ".join(filter(None, [exc.context, exc.problem]))
@@ -90,9 +106,8 @@ def read_yaml(text: str, file: str) -> tuple[Any, SourceMap]:
         raise SpecError(errors)
     if not isinstance(data, dict):
         kind = "a list" if isinstance(data, list) else f"the value {data!r}"
-        raise SpecError(
-            [Diagnostic(f"a spec must be a mapping of keys (version, name, robot, tasks, ...), but the file holds {kind}", "error", file, 1, 1)]
-        )
+        message = f"a spec must be a mapping of keys (version, name, robot, tasks, ...), but the file holds {kind}"
+        raise SpecError([source.diagnostic((), message)])
     return data, source
 
 

@@ -6,7 +6,7 @@ from typing import Literal
 
 from pydantic import Field, model_validator
 
-from .types import FieldError, Number, NumberList, ScalarOrVector, StrictModel, Vec3, size_of
+from .types import FieldError, Integer, Number, NumberList, ScalarOrVector, StrictModel, Vec3, size_of
 from .units import AngleUnit
 
 TaskType = Literal["position", "orientation", "pose", "joint"]
@@ -74,7 +74,7 @@ class TaskSpec(StrictModel):
     frame: str | None = Field(None, description="frame of a Cartesian task")
     axes: list[Axis] | None = Field(None, description="controlled axes; their number is the task dimension")
     joints: list[str] | None = Field(None, description="joints of a joint task (default: all)")
-    priority: int = Field(ge=1, description="1 is the highest; tasks may share a level")
+    priority: Integer = Field(ge=1, description="1 is the highest; tasks may share a level")
     gains: Gains
     reference: Reference | None = None
 
@@ -117,7 +117,7 @@ class TaskSpec(StrictModel):
             raise FieldError("reference", "feedforward needs `input: true` (it is read at run time)")
         if self.reference.input:
             if given:
-                raise FieldError("reference", f"give either `input: true` or constant values, not both ({given})")
+                raise FieldError("reference", f"give either `input: true` or constant values, not both ({', '.join(given)})")
             return
         extra = [f for f in given if f not in needs]
         if extra:

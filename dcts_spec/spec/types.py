@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 from typing import Annotated, Any
 
-from pydantic import BaseModel, ConfigDict, PlainValidator, WithJsonSchema
+from pydantic import AllowInfNan, BaseModel, ConfigDict, PlainValidator, Strict, WithJsonSchema
 
 
 class FieldError(ValueError):
@@ -63,7 +63,11 @@ def _vec3(value: Any) -> tuple[float, float, float]:
 _NUMBER_SCHEMA = {"type": "number"}
 _LIST_SCHEMA = {"type": "array", "items": _NUMBER_SCHEMA, "minItems": 1}
 
-Number = Annotated[float, PlainValidator(_number), WithJsonSchema(_NUMBER_SCHEMA)]
+# A native (strict, finite) float rather than a PlainValidator: a plain validator replaces the core schema,
+# and pydantic then silently drops field constraints such as `Field(gt=0)` (in validation and JSON Schema).
+Number = Annotated[float, Strict(), AllowInfNan(False)]
+# Strict: YAML reads `yes`/`on` as true, and a lax int would take true (and "1") as 1.
+Integer = Annotated[int, Strict()]
 NumberList = Annotated[tuple[float, ...], PlainValidator(_number_list), WithJsonSchema(_LIST_SCHEMA)]
 ScalarOrVector = Annotated[
     float | tuple[float, ...],
