@@ -1,0 +1,6 @@
+"""dcts: declare prioritized torque control of a redundant arm in YAML; validate, compile, simulate."""
+
+from .controller import Controller, StepResult, build_controller
+from .spec import Spec, SpecError, load_spec
+
+__all__ = ["Controller", "Spec", "SpecError", "StepResult", "build_controller", "load_spec"]

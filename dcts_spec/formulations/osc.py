@@ -1,0 +1,30 @@
+"""OSC — the closed-form dynamically consistent hierarchy, no limits (the paper's eq. 1, by levels).
+
+Each level's desired acceleration is met in the null space of the levels above
+(`hierarchy.py`); the remaining null space moves passively (minimum acceleration energy);
+a lowest level that is over-constrained is met in least squares. The torque is
+τ = M a + ν + g − τ_ext: gravity is compensated separately, as in the paper. OSC knows no
+limits: its torque is clipped to the torque limits after the fact.
+"""
+
+from __future__ import annotations
+
+import casadi as ca
+
+from ..symbolic.linalg import cholesky, cholesky_solve
+from .dcts import hierarchy_qp
+from .problem import ControlProblem
+from .qp import Affine, ControlLaw
+
+
+def osc(problem: ControlProblem) -> ControlLaw:
+    hqp = hierarchy_qp(problem)
+    acceleration = hqp.nominal_acceleration
+    z = hqp.z_columns
+    if z and hqp.structure.least_squares_last:
+        # Unconstrained optimum of the least-squares level: H_zz z = −f_z.
+        Hz = hqp.hessian[z, z]
+        acceleration = acceleration + ca.mtimes(hqp.acceleration.matrix[:, z], cholesky_solve(cholesky(Hz), -hqp.gradient[z]))
+    torque = Affine.constant(problem.torque(acceleration), 0)
+    scaling = Affine.constant(ca.SX.ones(len(problem.levels)), 0)
+    return ControlLaw(torque, scaling, enforces_torque_limits=False)

@@ -1,0 +1,1 @@
+"""Limits: joint and Cartesian bounds shaped into acceleration bounds, torque bounds."""

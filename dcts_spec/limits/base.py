@@ -1,0 +1,34 @@
+"""Bounds on the robot's (actual) joint acceleration a, as linear rows."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import casadi as ca
+
+
+@dataclass
+class AccelerationRows:
+    """lower ≤ matrix · a + offset ≤ upper, one row per bounded coordinate."""
+
+    matrix: ca.SX  # (r × n)
+    offset: ca.SX  # (r)
+    lower: ca.SX  # (r)
+    upper: ca.SX  # (r)
+    names: list[str]
+
+    @staticmethod
+    def stack(parts: list["AccelerationRows"], n: int) -> "AccelerationRows":
+        parts = [p for p in parts if p.names]
+        if not parts:
+            return AccelerationRows(ca.SX(0, n), ca.SX(0, 1), ca.SX(0, 1), ca.SX(0, 1), [])
+        return AccelerationRows(
+            ca.vertcat(*[p.matrix for p in parts]),
+            ca.vertcat(*[p.offset for p in parts]),
+            ca.vertcat(*[p.lower for p in parts]),
+            ca.vertcat(*[p.upper for p in parts]),
+            [name for p in parts for name in p.names],
+        )
+
+    def __len__(self) -> int:
+        return len(self.names)

@@ -1,0 +1,75 @@
+"""Acceleration bounds that keep a coordinate within its position and velocity bounds.
+
+Implements the discrete-time method of A. Del Prete, "Joint Position and Velocity Bounds in
+Discrete-Time Acceleration/Torque Control of Robot Manipulators", IEEE RA-L 3(1), 2018:
+over one control period dt, with the acceleration a held constant,
+  - position: the parabola x + dt ẋ + ½ dt² a stays inside [x_min, x_max] during the step
+    (its apex too, when it falls inside the step);
+  - velocity: |ẋ + dt a| ≤ v_max;
+  - viability: from the next state the coordinate can still stop before its position bound
+    braking at `braking` (x⁺ + ẋ⁺²/(2 braking) ≤ x_max), a quadratic inequality in a.
+The bounds are then clipped to ±`accel_limit`. When the state is already beyond what the
+bounds can recover (lower > upper), both become their midpoint so the QP stays feasible and
+the coordinate brakes as hard as allowed.
+"""
+
+from __future__ import annotations
+
+import casadi as ca
+
+_TINY = 1e-12
+# Beyond a bound, the position terms ask for absurd accelerations (~1/dt²); this keeps the QP
+# data well scaled while still asking for far more than any robot can do.
+_HUGE = 1e6
+
+
+def _upper_from_position(x, v, x_max, dt):
+    """Largest a keeping x ≤ x_max during the step, apex of the parabola included."""
+    end_of_step = 2.0 * (x_max - x - dt * v) / dt**2
+    stop = -v / dt
+    # Moving toward x_max (v > 0) and braking: the maximum is at t* = −v/a; inside the step
+    # (a < −v/dt) it is x − v²/(2a), which must stay ≤ x_max.
+    apex = -(v**2) / (2.0 * ca.fmax(x_max - x, _TINY))
+    return ca.if_else(ca.logic_and(v > 0, end_of_step < stop), apex, end_of_step)
+
+
+def _upper_from_viability(x, v, x_max, braking, dt):
+    """Largest a with dt² a² + (2 dt v + b dt²) a + v² − 2 b (x_max − x − dt v) ≤ 0, i.e. the next
+    state x⁺ = x + dt v + ½dt² a, v⁺ = v + dt a can still stop before x_max braking at b."""
+    qa = dt**2
+    qb = 2.0 * dt * v + braking * dt**2
+    qc = v**2 - 2.0 * braking * (x_max - x - dt * v)
+    delta = qb**2 - 4.0 * qa * qc
+    root = (-qb + ca.sqrt(ca.fmax(delta, 0.0))) / (2.0 * qa)
+    stop = -v / dt
+    # No real root: the state is not viable any more; the best is to stop within the step.
+    return ca.fmax(ca.if_else(delta >= 0, root, stop), stop)
+
+
+def _upper(x, v, x_max, braking, dt):
+    return ca.fmin(_upper_from_position(x, v, x_max, dt), _upper_from_viability(x, v, x_max, braking, dt))
+
+
+def acceleration_bounds(x, v, x_min, x_max, v_max, accel_limit, braking, dt):
+    """(lower, upper) bounds on the acceleration of a coordinate for the next control period.
+
+    x and v may be CasADi expressions; the bounds are numbers, ±inf where there is none.
+    """
+    inf = float("inf")
+    upper = ca.SX(inf)
+    lower = ca.SX(-inf)
+    if x_max != inf:
+        upper = _upper(x, v, x_max, braking, dt)
+    if x_min != -inf:
+        lower = -_upper(-x, -v, -x_min, braking, dt)  # the mirror image x → −x
+    if v_max != inf:
+        upper = ca.fmin(upper, (v_max - v) / dt)
+        lower = ca.fmax(lower, (-v_max - v) / dt)
+    if accel_limit != inf:
+        upper = ca.fmin(ca.fmax(upper, -accel_limit), accel_limit)
+        lower = ca.fmin(ca.fmax(lower, -accel_limit), accel_limit)
+    upper = ca.fmin(ca.fmax(upper, -_HUGE), _HUGE)
+    lower = ca.fmin(ca.fmax(lower, -_HUGE), _HUGE)
+    middle = 0.5 * (lower + upper)
+    conflict = lower > upper
+    return ca.if_else(conflict, middle, lower), ca.if_else(conflict, middle, upper)
