@@ -50,7 +50,7 @@ class StepResult:
         return self.status >= 0
 
 
-def data_function(problem: ControlProblem, law: ControlLaw) -> ca.Function:
+def data_function(problem: ControlProblem, law: ControlLaw, name: str = "qp_data") -> ca.Function:
     """The CasADi function that maps the controller inputs to the QP data and output maps."""
     nx = law.nx
     qp = law.qp
@@ -65,7 +65,7 @@ def data_function(problem: ControlProblem, law: ControlLaw) -> ca.Function:
     outputs = [H, f, A, lba, uba, lbx, ubx, torque.offset, torque.matrix, ddq0, Q, law.scaling.offset, law.scaling.matrix]
     inputs = [problem.q, problem.dq, problem.tau_ext, problem.ref]
     return ca.Function(
-        "qp_data",
+        name,
         inputs,
         [ca.densify(o) for o in outputs],
         ["q", "dq", "tau_ext", "ref"],
