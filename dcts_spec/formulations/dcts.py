@@ -10,7 +10,7 @@ factors sᵢ ∈ [0, 1] maximized with weights wᵢ ≫ wᵢ₊₁, dynamically 
 τ_ext in tasks and limits, torque and acceleration bounds — but parametrizes the acceleration by
 the recursive dynamically consistent hierarchy instead (see `hierarchy.py`):
 
-    a(x) = hierarchy(v₁ … v_k) + N_k z,     vᵢ = sᵢ ẍ_d,ᵢ + δᵢ
+    a(x) = hierarchy(v₁ … v_k) + Z z,     vᵢ = sᵢ ẍ_d,ᵢ + δᵢ,     range(Z) = range(N_k)
 
 so every level holds by construction, lower levels compensate for what higher levels do, and
 the QP only chooses x = (s, δ, z):
@@ -19,8 +19,8 @@ the QP only chooses x = (s, δ, z):
   - δᵢ changes its direction, penalized wᵢ κ/(‖ẍ_d,ᵢ‖² + 1)·‖δᵢ‖² so that scaling comes first;
     without it a level could only slow down, and a joint limit that needs the task to bend
     would make the QP infeasible;
-  - z moves the null space left by all levels, penalized by its acceleration energy
-    ½‖N_k z‖²_M (the part of ½(τ − g)ᵀM⁻¹(τ − g) the tasks do not fix).
+  - z moves the null space left by all levels (in an orthonormal basis Z of it), penalized by
+    its acceleration energy ½‖Z z‖²_M (the part of ½(τ − g)ᵀM⁻¹(τ − g) the tasks do not fix).
 With no bound active the optimum is s = 1, δ = 0, z = 0: exactly the closed-form hierarchy,
 i.e. the Gauss-principle (minimum acceleration energy) solution. The energy of the task part
 is left out of the objective on purpose: it is the w → ∞ limit of the paper's trade-off, and
@@ -37,13 +37,8 @@ from dataclasses import dataclass
 
 import casadi as ca
 
-from .hierarchy import (
-    NULL_SPACE_REGULARIZATION,
-    LevelStructure,
-    least_squares_objective,
-    level_structure,
-    recursive_hierarchy,
-)
+from ..symbolic.linalg import null_space_basis
+from .hierarchy import LevelStructure, least_squares_objective, level_structure, recursive_hierarchy
 from .problem import ControlProblem
 from .qp import INF, Affine, ControlLaw, with_limits
 
@@ -71,7 +66,7 @@ def hierarchy_qp(problem: ControlProblem) -> HierarchyQP:
     levels = problem.levels
     exact = levels[: structure.exact_levels]
     n, k = problem.n, len(exact)
-    nz = n if (structure.free_dimension > 0 or structure.least_squares_last) else 0
+    nz = structure.free_dimension
     dims = [lv.dim for lv in exact]
     nx = k + sum(dims) + nz
     variables = [f"s[{lv.priority}]" for lv in exact]
@@ -96,25 +91,22 @@ def hierarchy_qp(problem: ControlProblem) -> HierarchyQP:
         H[start : start + lv.dim, start : start + lv.dim] = 2.0 * direction_weight * ca.SX.eye(lv.dim)
         start += lv.dim
 
-    hierarchy = recursive_hierarchy(problem, commands, nx)
-    a = hierarchy.acceleration
-    N = hierarchy.null_projector
+    a = recursive_hierarchy(problem, commands, nx).acceleration
+    nominal = a.offset + sum((a.matrix[:, i] for i in range(k)), ca.SX.zeros(n))
     matrix = a.matrix
     if nz:
-        matrix[:, z_columns] = N
+        # The freedom left by the exact levels is null([J₁; …; J_k]) = range(N_k); a basis of it
+        # keeps the QP small (N_k z would carry n variables for n − Σmᵢ directions).
+        Z = null_space_basis(ca.vertcat(*[lv.jacobian for lv in exact])) if k else ca.SX.eye(n)
+        matrix[:, z_columns] = Z
+        if structure.least_squares_last:
+            last = levels[-1]
+            Hz, fz = least_squares_objective(last, nominal, Z, problem.mass_matrix, last.weight)
+            H[z_columns, z_columns] = Hz
+            f[z_columns] = fz
+        else:
+            H[z_columns, z_columns] = ca.mtimes([Z.T, problem.mass_matrix, Z])
     acceleration = Affine(a.offset, matrix)
-    nominal = a.offset + sum((a.matrix[:, i] for i in range(k)), ca.SX.zeros(n))
-
-    if nz and structure.least_squares_last:
-        last = levels[-1]
-        Hz, fz = least_squares_objective(last, nominal, N, problem.mass_matrix, last.weight)
-        H[z_columns, z_columns] = Hz
-        f[z_columns] = fz
-    elif nz:
-        complement = ca.SX.eye(n) - N
-        H[z_columns, z_columns] = ca.mtimes([N.T, problem.mass_matrix, N]) + NULL_SPACE_REGULARIZATION * ca.mtimes(
-            complement.T, complement
-        )
 
     lbx = [0.0] * k + [-INF] * (nx - k)
     ubx = [1.0] * k + [INF] * (nx - k)

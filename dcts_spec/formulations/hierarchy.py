@@ -29,8 +29,7 @@ from .qp import Affine
 SINGULARITY_DAMPING = 1e-10
 RANK_TOLERANCE = 1e-6
 RANK_SAMPLES = 12
-# Least-squares levels: the acceleration energy only breaks ties (weight relative to the task),
-# and γ‖(I − N)z‖² fixes the components of z that N removes, without biasing N z.
+# Least-squares levels: the acceleration energy only breaks ties (weight relative to the task).
 LEAST_SQUARES_ENERGY_RATIO = 1e-10
 NULL_SPACE_REGULARIZATION = 1.0
 
@@ -63,31 +62,27 @@ def recursive_hierarchy(problem: ControlProblem, commands: list[Affine], nx: int
 
 
 def least_squares_objective(
-    level: Level, acceleration: ca.SX, N: ca.SX, mass: ca.SX, weight: float
+    level: Level, acceleration: ca.SX, basis: ca.SX, mass: ca.SX, weight: float
 ) -> tuple[ca.SX, ca.SX]:
-    """Hessian and gradient in z of  w‖J(a + N z) + J̇q̇ − ẍ_d‖² + ε w ½‖N z‖²_M + γ‖(I − N) z‖².
+    """Hessian and gradient in z of  w‖J(a + B z) + J̇q̇ − ẍ_d‖² + ε w ½‖B z‖²_M.
 
-    Its minimizer is the closed-form step with a pseudo-inverse, a + J̄⁺(ẍ_d − J̇q̇ − J a), also
-    when J N has lost rank: the task is met in least squares, the rest at minimum energy. Unlike a
-    damped task-space inverse (J N M⁻¹ NᵀJᵀ + λ²I)⁻¹, whose condition number explodes when J N is
-    rank deficient, this stays well conditioned.
+    B spans the freedom left (a basis, or a projector N). The minimizer is the closed-form step
+    with a pseudo-inverse, a + J̄⁺(ẍ_d − J̇q̇ − J a), also when J B has lost rank: the task is met
+    in least squares, the rest at minimum energy. A damped task-space inverse
+    (J N M⁻¹ NᵀJᵀ + λ²I)⁻¹ would be hopelessly ill-conditioned there instead.
     """
-    n = N.shape[0]
-    JN = ca.mtimes(level.jacobian, N)
+    JB = ca.mtimes(level.jacobian, basis)
     residual = level.target - level.bias - ca.mtimes(level.jacobian, acceleration)
-    complement = ca.SX.eye(n) - N
-    hessian = (
-        2.0 * weight * ca.mtimes(JN.T, JN)
-        + LEAST_SQUARES_ENERGY_RATIO * weight * ca.mtimes([N.T, mass, N])
-        + NULL_SPACE_REGULARIZATION * ca.mtimes(complement.T, complement)
-    )
-    return hessian, -2.0 * weight * ca.mtimes(JN.T, residual)
+    hessian = 2.0 * weight * ca.mtimes(JB.T, JB) + LEAST_SQUARES_ENERGY_RATIO * weight * ca.mtimes([basis.T, mass, basis])
+    return hessian, -2.0 * weight * ca.mtimes(JB.T, residual)
 
 
 def least_squares_step(level: Level, acceleration: ca.SX, N: ca.SX, mass: ca.SX) -> tuple[ca.SX, ca.SX]:
     """One level of the hierarchy in least squares: the new acceleration and null-space projector."""
     hessian, gradient = least_squares_objective(level, acceleration, N, mass, 1.0)
-    factor = cholesky(hessian)
+    # z and N z are redundant along null(N); γ‖(I − N)z‖² fixes those components without biasing N z.
+    complement = ca.SX.eye(N.shape[0]) - N
+    factor = cholesky(hessian + NULL_SPACE_REGULARIZATION * ca.mtimes(complement.T, complement))
     z = cholesky_solve(factor, -gradient)
     # Δa = N H⁻¹ 2(J N)ᵀ r is linear in the residual r; its restriction to J N gives N_i.
     JN = ca.mtimes(level.jacobian, N)

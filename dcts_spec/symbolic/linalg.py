@@ -89,3 +89,25 @@ def spd_inverse(a: ca.SX) -> ca.SX:
             out[i, j] = ca.dot(linv[i:, i], linv[i:, j])
             out[j, i] = out[i, j]
     return out
+
+
+def null_space_basis(a: ca.SX) -> ca.SX:
+    """Orthonormal basis (n × (n − m)) of the null space of a full-row-rank A (m × n), m < n.
+
+    Householder QR of Aᵀ, unrolled: Aᵀ = Q R, and the last n − m columns of Q span null(A).
+    Householder QR is backward stable without pivoting; each reflector's sign is chosen to avoid
+    cancellation, and a zero column (A rank deficient) gives the identity reflector, not NaN.
+    """
+    m, n = a.shape
+    if m >= n:
+        raise ValueError(f"A must have fewer rows than columns, got {a.shape}")
+    r = ca.SX(a.T)
+    q = ca.SX.eye(n)
+    for k in range(m):
+        x = r[k:, k]
+        alpha = -ca.if_else(x[0] >= 0, 1.0, -1.0) * ca.norm_2(x)
+        v = ca.vertcat(x[0] - alpha, x[1:])
+        scale = 2.0 / (ca.sumsqr(v) + 1e-300)
+        r[k:, k:] = r[k:, k:] - scale * ca.mtimes(v, ca.mtimes(v.T, r[k:, k:]))
+        q[:, k:] = q[:, k:] - scale * ca.mtimes(ca.mtimes(q[:, k:], v), v.T)
+    return q[:, m:]
