@@ -34,16 +34,8 @@ LEAST_SQUARES_ENERGY_RATIO = 1e-10
 NULL_SPACE_REGULARIZATION = 1.0
 
 
-@dataclass
-class Hierarchy:
-    """Result of the recursion: a(x) and the projector onto the freedom left by all levels."""
-
-    acceleration: Affine
-    null_projector: ca.SX  # N_k (acceleration space): a + N_k z keeps every level's acceleration
-
-
-def recursive_hierarchy(problem: ControlProblem, commands: list[Affine], nx: int) -> Hierarchy:
-    """Run the recursion over the first len(commands) levels; commands[i] = v_i(x)."""
+def recursive_hierarchy(problem: ControlProblem, commands: list[Affine], nx: int) -> Affine:
+    """The acceleration a(x) after the first len(commands) levels; commands[i] = v_i(x)."""
     n = problem.n
     Minv = problem.mass_matrix_inverse
     offset = problem.free_acceleration
@@ -58,7 +50,7 @@ def recursive_hierarchy(problem: ControlProblem, commands: list[Affine], nx: int
         offset = offset + ca.mtimes(Jbar, v.offset - level.bias - ca.mtimes(J, offset))
         matrix = matrix + ca.mtimes(Jbar, v.matrix - ca.mtimes(J, matrix))
         N = N - ca.mtimes(Jbar, Jr)
-    return Hierarchy(Affine(offset, matrix), N)
+    return Affine(offset, matrix)
 
 
 def least_squares_objective(
