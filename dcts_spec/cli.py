@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import json
+import os
+import sys
 from pathlib import Path
 from typing import Annotated, Optional
 
@@ -31,9 +33,10 @@ def _fail(error: SpecError, as_json: bool = False) -> None:
 def validate(
     files: Annotated[list[Path], typer.Argument(help="spec files")],
     as_json: Annotated[bool, typer.Option("--json", help="machine-readable output")] = False,
+    check: Annotated[bool, typer.Option("--check", help="also compile every formulation and report QP sizes")] = False,
 ) -> None:
     """Check spec files and summarize them; exit 1 if any has an error."""
-    from .validate import validate_file
+    from .validate import compile_check, validate_file
 
     results, failed = [], False
     for file in files:
@@ -45,9 +48,14 @@ def validate(
             if not as_json:
                 typer.echo(str(error), err=True)
             continue
-        results.append(report.to_dict())
+        result = report.to_dict()
+        if check:
+            result["formulations"] = compile_check(report)
+        results.append(result)
         if not as_json:
             typer.echo(report.summary())
+            for name, info in result.get("formulations", {}).items():
+                typer.echo(f"  {name:<11} {info['summary']}")
     if as_json:
         typer.echo(json.dumps(results if len(results) > 1 else results[0], indent=2))
     raise typer.Exit(1 if failed else 0)
@@ -69,4 +77,14 @@ def schema(
 
 
 def main() -> None:
-    app()
+    """Entry point: no Python traceback reaches the user unless DCTS_DEBUG is set."""
+    try:
+        app()
+    except SpecError as error:
+        typer.echo(str(error), err=True)
+        sys.exit(1)
+    except Exception as error:  # a bug, or an environment problem: say what, not where
+        if os.environ.get("DCTS_DEBUG"):
+            raise
+        typer.echo(f"error: {type(error).__name__}: {error} (set DCTS_DEBUG=1 to see the traceback)", err=True)
+        sys.exit(2)
