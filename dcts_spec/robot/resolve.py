@@ -114,7 +114,7 @@ def _merge_limits(spec: Spec, urdf: JointLimits, n: int, diags: list[Diagnostic]
     """Spec limits override the URDF's; wider than the URDF only when explicitly allowed."""
     src = spec.source
     lim = spec.limits
-    q_min, q_max, v_max, tau_max, a_max = urdf.q_min, urdf.q_max, urdf.v_max, urdf.tau_max, urdf.a_max
+    q_min, q_max, a_max = urdf.q_min, urdf.q_max, urdf.a_max
     if (jp := lim.joint_position) is not None:
         base = ("limits", "joint_position")
         lo = _vector(jp.min, jp.unit, n, base + ("min",), src, diags, "min") if jp.min is not None else q_min
@@ -129,27 +129,27 @@ def _merge_limits(spec: Spec, urdf: JointLimits, n: int, diags: list[Diagnostic]
             _outside(lo < urdf.q_min - 1e-9, base + ("min",), "below the URDF's lower limit", jp.allow_outside_urdf, src, diags)
             _outside(hi > urdf.q_max + 1e-9, base + ("max",), "above the URDF's upper limit", jp.allow_outside_urdf, src, diags)
             q_min, q_max = lo, hi
-    if (jv := lim.joint_velocity) is not None:
-        path = ("limits", "joint_velocity", "max")
-        v = _vector(jv.max, jv.unit, n, path, src, diags, "max")
-        if v is not None:
-            _positive(v, path, src, diags)
-            _outside(v > urdf.v_max + 1e-9, path, "above the URDF's velocity limit", jv.allow_outside_urdf, src, diags)
-            v_max = v
-    if (ja := lim.joint_acceleration) is not None:
-        path = ("limits", "joint_acceleration", "max")
-        a = _vector(ja.max, ja.unit, n, path, src, diags, "max")
-        if a is not None:
-            _positive(a, path, src, diags)
-            a_max = a
-    if (jt := lim.joint_torque) is not None:
-        path = ("limits", "joint_torque", "max")
-        t = _vector(jt.max, jt.unit, n, path, src, diags, "max")
-        if t is not None:
-            _positive(t, path, src, diags)
-            _outside(t > urdf.tau_max + 1e-9, path, "above the URDF's effort limit", jt.allow_outside_urdf, src, diags)
-            tau_max = t
+    v_max = _symmetric(lim.joint_velocity, "joint_velocity", urdf.v_max, "velocity", n, src, diags)
+    a_max = _symmetric(lim.joint_acceleration, "joint_acceleration", a_max, None, n, src, diags)
+    tau_max = _symmetric(lim.joint_torque, "joint_torque", urdf.tau_max, "effort", n, src, diags)
     return JointLimits(q_min=q_min, q_max=q_max, v_max=v_max, tau_max=tau_max, a_max=a_max)
+
+
+def _symmetric(section, key: str, urdf: np.ndarray, urdf_name: str | None, n: int, src, diags) -> np.ndarray:
+    """A symmetric bound |x| ≤ max from the spec (checked), or the URDF's where the spec has none.
+
+    `urdf_name` is None for bounds the URDF does not declare (accelerations): no comparison then.
+    """
+    if section is None:
+        return urdf
+    path = ("limits", key, "max")
+    values = _vector(section.max, section.unit, n, path, src, diags, "max")
+    if values is None:
+        return urdf
+    _positive(values, path, src, diags)
+    if urdf_name is not None:
+        _outside(values > urdf + 1e-9, path, f"above the URDF's {urdf_name} limit", section.allow_outside_urdf, src, diags)
+    return values
 
 
 def _positive(values: np.ndarray, path: tuple, src, diags: list[Diagnostic]) -> None:
