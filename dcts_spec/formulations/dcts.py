@@ -91,7 +91,7 @@ def hierarchy_qp(problem: ControlProblem) -> HierarchyQP:
         H[start : start + lv.dim, start : start + lv.dim] = 2.0 * direction_weight * ca.SX.eye(lv.dim)
         start += lv.dim
 
-    a = recursive_hierarchy(problem, commands, nx)
+    a, _ = recursive_hierarchy(problem, commands, nx)
     nominal = a.offset + sum((a.matrix[:, i] for i in range(k)), ca.SX.zeros(n))
     matrix = a.matrix
     if nz:

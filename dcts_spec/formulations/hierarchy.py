@@ -24,9 +24,12 @@ from ..symbolic.linalg import cholesky, cholesky_solve, spd_inverse
 from .problem import ControlProblem, Level
 from .qp import Affine
 
-# Damping λ² of (J M⁻¹ Jᵀ + λ² I)⁻¹: negligible away from singularities (its effect is
-# λ²/σ_min² relative), it keeps the inverse bounded at a singular configuration.
-SINGULARITY_DAMPING = 1e-10
+# Near a singularity the level's inverse is damped (λ² I added), the more the closer: damping
+# starts when the smallest Cholesky pivot of J M⁻¹ Jᵀ falls below SINGULAR_PIVOT times its mean
+# eigenvalue and reaches MAX_DAMPING times that mean at the singularity. Away from singularities
+# λ = 0 exactly, so the hierarchy is exact and no level leaks into a higher one.
+SINGULAR_PIVOT = 1e-8
+MAX_DAMPING = 1e-6
 RANK_TOLERANCE = 1e-6
 RANK_SAMPLES = 12
 # Least-squares levels: the acceleration energy only breaks ties (weight relative to the task).
@@ -34,23 +37,46 @@ LEAST_SQUARES_ENERGY_RATIO = 1e-10
 NULL_SPACE_REGULARIZATION = 1.0
 
 
-def recursive_hierarchy(problem: ControlProblem, commands: list[Affine], nx: int) -> Affine:
-    """The acceleration a(x) after the first len(commands) levels; commands[i] = v_i(x)."""
+def damped_inverse(a: ca.SX) -> ca.SX:
+    """(A + λ²I)⁻¹ of a positive semi-definite A, with λ > 0 only near a singularity of A."""
+    m = a.shape[0]
+    mean = ca.trace(a) / m + 1e-300
+    # min pivot² ≥ λ_min(A), and det A = Π pivots², so a vanishing eigenvalue shows in a pivot
+    pivots = ca.diag(cholesky(a + 1e-12 * mean * ca.SX.eye(m))) ** 2
+    smallest = pivots[0]
+    for j in range(1, m):
+        smallest = ca.fmin(smallest, pivots[j])
+    closeness = ca.fmax(0.0, 1.0 - smallest / (SINGULAR_PIVOT * mean))
+    return spd_inverse(a + MAX_DAMPING * mean * closeness**2 * ca.SX.eye(m))
+
+
+def recursive_hierarchy(
+    problem: ControlProblem,
+    commands: list[Affine],
+    nx: int,
+    metric_inverse: ca.SX | None = None,
+    free_acceleration: ca.SX | None = None,
+    projector: ca.SX | None = None,
+) -> tuple[Affine, ca.SX]:
+    """The acceleration a(x) after the first len(commands) levels (commands[i] = v_i(x)), and N.
+
+    The metric M⁻¹, the free acceleration a₀ and N₀ = I can be replaced (the projector baseline
+    locks joints: it passes the metric and a₀ of the locked robot, and N₀ = its free joints).
+    """
     n = problem.n
-    Minv = problem.mass_matrix_inverse
-    offset = problem.free_acceleration
+    Minv = problem.mass_matrix_inverse if metric_inverse is None else metric_inverse
+    offset = problem.free_acceleration if free_acceleration is None else free_acceleration
     matrix = ca.SX(n, nx)
-    N = ca.SX.eye(n)
+    N = ca.SX.eye(n) if projector is None else projector
     for level, v in zip(problem.levels, commands):
         J = level.jacobian
         Jr = ca.mtimes(J, N)
         Minv_JrT = ca.mtimes(Minv, Jr.T)
-        Lambda = spd_inverse(ca.mtimes(Jr, Minv_JrT) + SINGULARITY_DAMPING * ca.SX.eye(level.dim))
-        Jbar = ca.mtimes(Minv_JrT, Lambda)
+        Jbar = ca.mtimes(Minv_JrT, damped_inverse(ca.mtimes(Jr, Minv_JrT)))
         offset = offset + ca.mtimes(Jbar, v.offset - level.bias - ca.mtimes(J, offset))
         matrix = matrix + ca.mtimes(Jbar, v.matrix - ca.mtimes(J, matrix))
         N = N - ca.mtimes(Jbar, Jr)
-    return Affine(offset, matrix)
+    return Affine(offset, matrix), N
 
 
 def least_squares_objective(
@@ -69,17 +95,13 @@ def least_squares_objective(
     return hessian, -2.0 * weight * ca.mtimes(JB.T, residual)
 
 
-def least_squares_step(level: Level, acceleration: ca.SX, N: ca.SX, mass: ca.SX) -> tuple[ca.SX, ca.SX]:
-    """One level of the hierarchy in least squares: the new acceleration and null-space projector."""
+def least_squares_step(level: Level, acceleration: ca.SX, N: ca.SX, mass: ca.SX) -> ca.SX:
+    """The acceleration after a level solved in least squares within range(N)."""
     hessian, gradient = least_squares_objective(level, acceleration, N, mass, 1.0)
     # z and N z are redundant along null(N); γ‖(I − N)z‖² fixes those components without biasing N z.
     complement = ca.SX.eye(N.shape[0]) - N
-    factor = cholesky(hessian + NULL_SPACE_REGULARIZATION * ca.mtimes(complement.T, complement))
-    z = cholesky_solve(factor, -gradient)
-    # Δa = N H⁻¹ 2(J N)ᵀ r is linear in the residual r; its restriction to J N gives N_i.
-    JN = ca.mtimes(level.jacobian, N)
-    gain = ca.mtimes(N, cholesky_solve(factor, 2.0 * JN.T))
-    return acceleration + ca.mtimes(N, z), N - ca.mtimes(gain, JN)
+    z = cholesky_solve(cholesky(hessian + NULL_SPACE_REGULARIZATION * ca.mtimes(complement.T, complement)), -gradient)
+    return acceleration + ca.mtimes(N, z)
 
 
 @dataclass(frozen=True)

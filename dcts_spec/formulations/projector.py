@@ -8,8 +8,8 @@ space", IEEE T-RO 2015) is applied at the acceleration level to the whole hierar
 free joint exceeds its bounds, the one exceeding most is locked at its bound and the hierarchy
 is recomputed with the remaining joints (at most n times, unrolled so the generated code has a
 fixed cost). Locking joints keeps the dynamical consistency of the rest: the metric is the
-mass matrix of the robot with those joints locked, and each level is solved in least squares
-(`hierarchy.least_squares_step`), so levels that lose rank when joints lock degrade smoothly.
+mass matrix of the robot with those joints locked (levels that lose rank when joints lock are
+damped, as at a singularity).
 Unlike SNS, tasks are not scaled, and, as in the paper, each torque is finally clipped to its
 limit without re-solving ("naive" saturation), which is what breaks the velocity limits.
 """
@@ -19,8 +19,8 @@ from __future__ import annotations
 import casadi as ca
 
 from ..limits.joint import joint_rows
-from ..symbolic.linalg import cholesky, cholesky_solve
-from .hierarchy import least_squares_step
+from ..symbolic.linalg import spd_inverse
+from .hierarchy import LevelStructure, least_squares_step, level_structure, recursive_hierarchy
 from .problem import ControlProblem
 from .qp import Affine, ControlLaw
 
@@ -38,28 +38,33 @@ def _joint_bounds(problem: ControlProblem) -> tuple[ca.SX, ca.SX]:
     return lower, upper
 
 
-def _locked_hierarchy(problem: ControlProblem, free: ca.SX, locked_acceleration: ca.SX) -> ca.SX:
+def _locked_hierarchy(
+    problem: ControlProblem, structure: LevelStructure, free: ca.SX, locked_acceleration: ca.SX
+) -> ca.SX:
     """The hierarchy's acceleration when joints with free_j = 0 have their acceleration fixed."""
     locked = 1.0 - free
     W = ca.diag(free)
     M = problem.mass_matrix
     fixed = locked * locked_acceleration
     # Gauss's principle with the locked joints' accelerations prescribed: the free joints see the
-    # mass matrix W M W (the identity on locked joints keeps the factorization regular).
-    factor = cholesky(ca.mtimes([W, M, W]) + ca.diag(locked))
-    acceleration = fixed + ca.mtimes(W, cholesky_solve(factor, ca.mtimes(W, problem.external_torque - problem.coriolis - ca.mtimes(M, fixed))))
-    N = W
-    for level in problem.levels:
-        acceleration, N = least_squares_step(level, acceleration, N, M)
-    return acceleration
+    # mass matrix W M W (the identity on locked joints keeps it invertible).
+    metric_inverse = ca.mtimes([W, spd_inverse(ca.mtimes([W, M, W]) + ca.diag(locked)), W])
+    free_acceleration = fixed + ca.mtimes(metric_inverse, problem.external_torque - problem.coriolis - ca.mtimes(M, fixed))
+    exact = problem.levels[: structure.exact_levels]
+    commands = [Affine(level.target, ca.SX(level.dim, 0)) for level in exact]
+    hierarchy, N = recursive_hierarchy(problem, commands, 0, metric_inverse, free_acceleration, W)
+    if not structure.least_squares_last:
+        return hierarchy.offset
+    return least_squares_step(problem.levels[-1], hierarchy.offset, N, M)
 
 
 def projector(problem: ControlProblem) -> ControlLaw:
     n = problem.n
     lower, upper = _joint_bounds(problem)
+    structure = level_structure(problem)
     free = ca.SX.ones(n)
     locked_acceleration = ca.SX.zeros(n)
-    acceleration = _locked_hierarchy(problem, free, locked_acceleration)
+    acceleration = _locked_hierarchy(problem, structure, free, locked_acceleration)
     for _ in range(n):
         violation = free * ca.fmax(ca.fmax(acceleration - upper, lower - acceleration), 0.0)
         # one-hot of the joint exceeding its bounds most (none if no free joint exceeds them)
@@ -74,7 +79,7 @@ def projector(problem: ControlProblem) -> ControlLaw:
         worst = worst * (largest > 0)
         free = free * (1.0 - worst)
         locked_acceleration = locked_acceleration + worst * (ca.fmin(ca.fmax(acceleration, lower), upper) - locked_acceleration)
-        acceleration = _locked_hierarchy(problem, free, locked_acceleration)
+        acceleration = _locked_hierarchy(problem, structure, free, locked_acceleration)
     torque = Affine.constant(problem.torque(acceleration), 0)
     scaling = Affine.constant(ca.SX.ones(len(problem.levels)), 0)
     return ControlLaw(torque, scaling, enforces_torque_limits=False)

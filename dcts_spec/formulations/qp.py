@@ -9,9 +9,10 @@ import casadi as ca
 from .problem import ControlProblem
 
 INF = float("inf")
-# Penalty on the limit relaxation σ: only in play when the limits and the torque bounds
-# cannot all hold, where it must dominate every task weight.
-RELAXATION_WEIGHT = 1e12
+# Penalty on the limit relaxation σ, relative to the largest curvature of the objective: σ is only
+# in play when the limits and the torque bounds cannot all hold, where it must dominate every task
+# weight; relative, so the Hessian stays as well conditioned as the formulation allows.
+RELAXATION_WEIGHT = 1e3
 
 
 @dataclass
@@ -102,7 +103,8 @@ def with_limits(
     lba = ca.vertcat(-tau_max - torque.offset, -INF * ones, rows.lower - R_c)
     uba = ca.vertcat(tau_max - torque.offset, rows.upper - R_c, INF * ones)
 
-    H = ca.diagcat(hessian, ca.SX(RELAXATION_WEIGHT))
+    largest = ca.mmax(ca.fabs(ca.diag(hessian))) if len(variables) else ca.SX(1.0)
+    H = ca.diagcat(hessian, RELAXATION_WEIGHT * largest)
     f = ca.vertcat(gradient, 0.0)
     qp = QP(H, f, A, lba, uba, ca.vertcat(*lbx, 0.0), ca.vertcat(*ubx, 0.0), [*variables, "sigma"], sigma)
     return qp, torque

@@ -13,6 +13,11 @@ import casadi as ca
 from .problem import ControlProblem
 from .qp import INF, Affine, ControlLaw, with_limits
 
+# ε‖a‖², relative to the top level: keeps the Hessian positive definite with a sane condition number
+# where neither the tasks nor the regularization see a joint (QP-MT barely sees a light wrist,
+# whose torques are tiny); it changes the solution by ~ε.
+ACCELERATION_REGULARIZATION = 1e-8
+
 
 def weighted_qp(problem: ControlProblem, regularization_hessian: ca.SX, regularization_gradient: ca.SX) -> ControlLaw:
     """QP-MT / QP-MD given their regularization ½aᵀH_r a + f_rᵀa (up to a constant)."""
@@ -26,7 +31,7 @@ def weighted_qp(problem: ControlProblem, regularization_hessian: ca.SX, regulari
         H += 2.0 * w * ca.mtimes(J.T, J)
         f += -2.0 * w * ca.mtimes(J.T, level.target - level.bias)
     w_r = problem.spec.controller.regularization_weight * problem.levels[-1].weight / top
-    H += w_r * regularization_hessian
+    H += w_r * regularization_hessian + ACCELERATION_REGULARIZATION * ca.SX.eye(n)
     f += w_r * regularization_gradient
     acceleration = Affine(ca.SX.zeros(n), ca.SX.eye(n))
     qp, torque = with_limits(problem, acceleration, H, f, [-INF] * n, [INF] * n, [f"a[{j}]" for j in range(n)])

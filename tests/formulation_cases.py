@@ -1,0 +1,261 @@
+"""Helpers of test_formulations.py: specs, random states, and independent numeric checks.
+
+Everything that *checks* a controller here is computed from Pinocchio and NumPy (tests/reference.py
+and the functions below), never from dcts_spec's symbolic layer or formulations. The only piece of
+dcts_spec reused is `limits.viability.acceleration_bounds`, evaluated on numbers, which defines what
+the shaped joint/Cartesian acceleration bounds *are*.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pinocchio as pin
+
+from dcts_spec.limits.joint import DEFAULT_BRAKING
+from dcts_spec.limits.viability import acceleration_bounds
+from dcts_spec.spec import Spec, load_spec_text
+from dcts_spec.spec.units import to_si
+from reference import NumericTask, closed_form_hierarchy
+
+# Tool frame used for the Cartesian tasks of each built-in robot.
+TOOL = {"iiwa14": "tool", "panda": "panda_hand_tcp"}
+# A comfortable configuration of each robot (tool in front of the base, pointing down-ish).
+HOME = {
+    "iiwa14": np.array([0.0, 0.6, 0.0, -1.2, 0.0, 0.8, 0.0]),
+    "panda": np.array([0.0, -0.3, 0.0, -2.0, 0.0, 1.8, 0.8]),
+}
+AXIS_ROW = {"x": 0, "y": 1, "z": 2, "rx": 3, "ry": 4, "rz": 5}
+
+# Large limits so that the "no bound active" properties see no active bound (checked anyway).
+WIDE_LIMITS = """
+  joint_torque: {max: 10000, allow_outside_urdf: true}
+  joint_velocity: {max: 20, allow_outside_urdf: true}
+"""
+
+
+def spec_text(robot: str, tasks: str, limits: str = "", controller: str = "", name: str = "case") -> str:
+    """A YAML spec; `tasks`, `limits` and `controller` are YAML bodies indented by two spaces."""
+    text = f"version: 1\nname: {name}\nrobot: {{model: {robot}}}\n"
+    if limits.strip():
+        text += "limits:\n" + limits.strip("\n") + "\n"
+    if controller.strip():
+        text += "controller:\n" + controller.strip("\n") + "\n"
+    return text + "tasks:\n" + tasks.strip("\n") + "\n"
+
+
+def case_tasks(case: str, robot: str) -> str:
+    """Task lists of the property cases (constant references near the robot's workspace).
+
+    a: position(3) @1 + orientation(rx, ry) @2 + posture @3 (the posture is over-constrained: least squares)
+    b: pose 6-D @1 + posture @2
+    c: orientation(rx, ry) @1 + joint damping (kp = 0) @2
+    d: position(3) and orientation(rx, ry) sharing level 1 + damping of the first joint @2 (1-D null space left)
+    e: position(3) @1 + orientation(rx, ry) @2 (2-D null space left)
+    """
+    tool = TOOL[robot]
+    posture = ", ".join(f"{v:.3f}" for v in HOME[robot])
+    first_joint = "joint1" if robot == "iiwa14" else "panda_joint1"
+    position = f"{{name: reach, type: position, frame: {tool}, priority: 1, gains: {{kp: 40, kd: 12}}, reference: {{position: [0.5, 0.1, 0.55]}}}}"
+    orientation = (
+        f"{{name: point, type: orientation, frame: {tool}, axes: [rx, ry], priority: {{p}}, gains: {{kp: 30, kd: 10}}, "
+        "reference: {rpy: [3.0, 0.2, 0.0]}}"
+    )
+    cases = {
+        "a": [position, orientation.replace("{p}", "2"),
+              f"{{name: posture, type: joint, priority: 3, gains: {{kp: 10, kd: 6}}, reference: {{q: [{posture}]}}}}"],
+        "b": [f"{{name: pose, type: pose, frame: {tool}, priority: 1, gains: {{kp: 40, kd: 12}}, "
+              "reference: {position: [0.5, -0.1, 0.5], rpy: [3.0, 0.3, 0.5]}}",
+              f"{{name: posture, type: joint, priority: 2, gains: {{kp: 10, kd: 6}}, reference: {{q: [{posture}]}}}}"],
+        "c": [orientation.replace("{p}", "1"),
+              "{name: damping, type: joint, priority: 2, gains: {kp: 0, kd: 5}}"],
+        "d": [position, orientation.replace("{p}", "1"),
+              f"{{name: base_damping, type: joint, joints: [{first_joint}], priority: 2, gains: {{kp: 0, kd: 5}}}}"],
+        "e": [position, orientation.replace("{p}", "2")],
+    }
+    return "\n".join(f"  - {t}" for t in cases[case])
+
+
+def case_spec(case: str, robot: str, limits: str = WIDE_LIMITS, controller: str = "") -> Spec:
+    return load_spec_text(spec_text(robot, case_tasks(case, robot), limits, controller, name=f"case_{case}"))
+
+
+# -- random states ---------------------------------------------------------------------------------
+
+
+@dataclass
+class State:
+    q: np.ndarray
+    dq: np.ndarray
+    tau_ext: np.ndarray
+
+
+def random_states(model: pin.Model, count: int, seed: int, margin: float = 0.3, tau_ext: bool = True) -> list[State]:
+    """q uniform inside the joint limits shrunk by `margin`, q̇ ~ N(0, 0.5), τ_ext ~ N(0, 5) (or 0)."""
+    rng = np.random.default_rng(seed)
+    lo, hi = model.lowerPositionLimit + margin, model.upperPositionLimit - margin
+    n = model.nv
+    return [
+        State(rng.uniform(lo, hi), rng.normal(0.0, 0.5, n), rng.normal(0.0, 5.0, n) if tau_ext else np.zeros(n))
+        for _ in range(count)
+    ]
+
+
+# -- the spec's tasks as the reference sees them ---------------------------------------------------
+
+
+def numeric_tasks(spec: Spec, joint_names: list[str]) -> list[NumericTask]:
+    """The spec's tasks read directly from the spec entries (not through dcts_spec.tasks)."""
+    out = []
+    for t in spec.tasks:
+        ref = t.reference
+        if t.type == "joint":
+            joints = list(t.joints) if t.joints is not None else list(joint_names)
+            dim = len(joints)
+        else:
+            dim = len(t.axis_names)
+        kp = np.broadcast_to(np.asarray(t.gains.kp, dtype=float), (dim,)).copy()
+        kd = np.broadcast_to(np.asarray(t.gains.kd, dtype=float), (dim,)).copy()
+        if t.type == "joint":
+            q = None if ref is None or ref.q is None else np.array(to_si(list(ref.q), ref.unit))
+            out.append(NumericTask(t.priority, "joint", kp, kd, joints=[joint_names.index(j) for j in joints], q=q))
+        else:
+            position = None if ref is None or ref.position is None else np.array(ref.position, dtype=float)
+            rotation = None if ref is None or ref.rpy is None else pin.rpy.rpyToMatrix(*to_si(list(ref.rpy), ref.unit))
+            rows = [AXIS_ROW[a] for a in t.axis_names]
+            out.append(NumericTask(t.priority, t.type, kp, kd, frame=t.frame, rows=rows, position=position, rotation=rotation))
+    return out
+
+
+# -- numeric dynamics and checks -------------------------------------------------------------------
+
+
+def dynamics(model: pin.Model, q: np.ndarray, dq: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """M, ν (Coriolis/centrifugal) and g from Pinocchio."""
+    data = model.createData()
+    M = pin.crba(model, data, q)
+    M = np.triu(M) + np.triu(M, 1).T
+    g = pin.computeGeneralizedGravity(model, data, q)
+    nu = pin.rnea(model, data, q, dq, np.zeros(model.nv)) - g
+    return M, nu, g
+
+
+def actual_acceleration(model: pin.Model, q, dq, tau, tau_ext) -> np.ndarray:
+    """Forward dynamics: a = M⁻¹(τ + τ_ext − ν − g), from Pinocchio (ABA)."""
+    return pin.aba(model, model.createData(), q, dq, tau + tau_ext)
+
+
+def level_residuals(levels, a: np.ndarray) -> list[np.ndarray]:
+    """J_i a + J̇_i q̇ − ẍ_d,i for every level (levels as returned by closed_form_hierarchy)."""
+    return [J @ a + bias - target for J, bias, target in levels]
+
+
+def span_residual(levels, vector: np.ndarray) -> float:
+    """Relative residual of the least-squares projection of `vector` onto span([J_1ᵀ … J_kᵀ])."""
+    JT = np.hstack([J.T for J, _, _ in levels])
+    coefficients, *_ = np.linalg.lstsq(JT, vector, rcond=None)
+    return float(np.linalg.norm(vector - JT @ coefficients) / max(np.linalg.norm(vector), 1e-12))
+
+
+def null_space_dimension(levels) -> int:
+    J = np.vstack([J for J, _, _ in levels])
+    return J.shape[1] - np.linalg.matrix_rank(J, 1e-8)
+
+
+def joint_acceleration_bounds(robot, q, dq, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """The shaped bounds on each joint's acceleration (±inf where a joint has no bound)."""
+    lim = robot.limits
+    lower, upper = np.full(len(q), -np.inf), np.full(len(q), np.inf)
+    for j in range(len(q)):
+        if not np.isfinite([lim.q_min[j], lim.q_max[j], lim.v_max[j], lim.a_max[j]]).any():
+            continue
+        braking = lim.a_max[j] if np.isfinite(lim.a_max[j]) else DEFAULT_BRAKING
+        lo, hi = acceleration_bounds(float(q[j]), float(dq[j]), lim.q_min[j], lim.q_max[j], lim.v_max[j], lim.a_max[j], braking, dt)
+        lower[j], upper[j] = float(lo), float(hi)
+    return lower, upper
+
+
+def cartesian_accelerations(robot, q, dq, a, dt: float) -> list[tuple[str, float, float, float]]:
+    """(name, lower, c̈, upper) for each Cartesian bound: c̈ = J_c a + J̇_c q̇ from Pinocchio."""
+    model = robot.model
+    data = model.createData()
+    pin.forwardKinematics(model, data, q, dq, np.zeros(model.nv))
+    pin.computeJointJacobians(model, data, q)
+    pin.updateFramePlacements(model, data)
+    out = []
+    for b in robot.cartesian_bounds:
+        fid = model.getFrameId(b.frame)
+        J = pin.getFrameJacobian(model, data, fid, pin.LOCAL_WORLD_ALIGNED)[b.axis]
+        bias = pin.getFrameClassicalAcceleration(model, data, fid, pin.LOCAL_WORLD_ALIGNED).vector[b.axis]
+        c, c_dot = data.oMf[fid].translation[b.axis], J @ dq
+        lo, hi = acceleration_bounds(float(c), float(c_dot), b.c_min, b.c_max, b.v_max, np.inf, b.a_max, dt)
+        out.append((f"{b.frame}.{'xyz'[b.axis]}", float(lo), float(J @ a + bias), float(hi)))
+    return out
+
+
+def _side_margins(lower, value, upper) -> np.ndarray:
+    """min over both sides of (distance inside the bound) / max(1, |bound|): < 0 means violated."""
+    lower, value, upper = (np.asarray(v, dtype=float) for v in (lower, value, upper))
+    with np.errstate(invalid="ignore"):
+        low = np.where(np.isfinite(lower), (value - lower) / np.maximum(1.0, np.abs(lower)), np.inf)
+        high = np.where(np.isfinite(upper), (upper - value) / np.maximum(1.0, np.abs(upper)), np.inf)
+    return np.minimum(low, high)
+
+
+@dataclass
+class BoundCheck:
+    """Relative margins of a step's torque and accelerations to every bound: > 0 inside, < 0 beyond.
+
+    Each margin is the distance to the bound divided by max(1, |bound|) (τ_max for torques).
+    """
+
+    torque: np.ndarray  # per joint
+    joint: np.ndarray  # per joint (inf for joints without any bound)
+    cartesian: np.ndarray  # per Cartesian bound
+
+    def violation(self) -> float:
+        """Largest relative violation of any bound (0 if none)."""
+        margins = np.concatenate([self.torque, self.joint, self.cartesian])
+        return float(max(0.0, -margins.min())) if margins.size else 0.0
+
+    def active(self, tol: float = 1e-6) -> dict[str, np.ndarray]:
+        return {name: np.flatnonzero(getattr(self, name) <= tol) for name in ("torque", "joint", "cartesian")}
+
+    def any_active(self, tol: float = 1e-6) -> bool:
+        return any(v.size for v in self.active(tol).values())
+
+
+def check_bounds(robot, q, dq, tau, a, dt: float) -> BoundCheck:
+    """Margins of τ to the torque limits and of the acceleration a to the shaped joint/Cartesian bounds."""
+    lower, upper = joint_acceleration_bounds(robot, q, dq, dt)
+    cart = cartesian_accelerations(robot, q, dq, a, dt)
+    tau_max = robot.limits.tau_max
+    return BoundCheck(
+        torque=_side_margins(-tau_max, tau, tau_max),
+        joint=_side_margins(lower, a, upper),
+        cartesian=np.array([_side_margins(lo, c, hi) for _, lo, c, hi in cart], dtype=float).reshape(-1),
+    )
+
+
+def reference_solution(model, tasks, state: State, measured: bool = True):
+    """(τ, a, levels) of the independent closed-form hierarchy at a state."""
+    return closed_form_hierarchy(model, tasks, state.q, state.dq, state.tau_ext if measured else None)
+
+
+def relative(x: np.ndarray, y: np.ndarray) -> float:
+    return float(np.abs(x - y).max() / max(np.abs(y).max(), 1.0))
+
+
+def approach_speed(distance: float, v_max: float, braking: float, dt: float, upper: float) -> float:
+    """The speed toward a position bound `distance` away at which the shaped upper acceleration bound
+    equals `upper` (bisection: the bound falls as the speed grows)."""
+
+    def bound(v: float) -> float:
+        return float(acceleration_bounds(0.0, v, -np.inf, distance, v_max, np.inf, braking, dt)[1])
+
+    lo, hi = 0.0, 50.0
+    for _ in range(100):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if bound(mid) > upper else (lo, mid)
+    return 0.5 * (lo + hi)
