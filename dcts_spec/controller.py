@@ -15,12 +15,13 @@ import casadi as ca
 import numpy as np
 
 from .formulations import FORMULATIONS, ControlLaw, ControlProblem, build_problem
+from .formulations.qp import relaxed_qp
 from .robot.model import Robot
 from .spec import Spec, load_spec
 from .tasks import ReferenceInput
 
 STATUS_OK = 0
-STATUS_LIMITS_RELAXED = 1  # joint/Cartesian bounds widened: they conflicted with the torque limits
+STATUS_LIMITS_RELAXED = 1  # joint/Cartesian bounds violated as little as the torque limits allow
 STATUS_NONFINITE_INPUT = -1  # fallback torque
 STATUS_SOLVER_FAILED = -2  # fallback torque
 STATUS_INVALID_OUTPUT = -3  # the solution was not finite or broke a torque limit: fallback torque
@@ -99,7 +100,8 @@ class Controller:
         self.tau_max = np.asarray(robot.limits.tau_max, dtype=float)
         self.fallback_damping = self.problem.vector("fallback_damping")
         self._last_gravity = np.zeros(self.n)
-        self._solver = self._make_solver() if self.nx else None
+        self._solver = self._make_solver(self.nx, self.na) if self.nx else None
+        self._relaxed_solver: ca.Function | None = None
 
     # -- sizes and layout ------------------------------------------------------------------------
 
@@ -131,26 +133,30 @@ class Controller:
 
     # -- running ---------------------------------------------------------------------------------
 
-    def _make_solver(self) -> ca.Function:
-        qp = {"h": ca.Sparsity.dense(self.nx, self.nx), "a": ca.Sparsity.dense(self.na, self.nx)}
+    def _make_solver(self, nx: int, na: int) -> ca.Function:
+        qp = {"h": ca.Sparsity.dense(nx, nx), "a": ca.Sparsity.dense(na, nx)}
         if self.solver == "daqp":
             return ca.conic("dcts_qp", "daqp", qp, {"error_on_fail": False, "daqp": dict(DAQP_SETTINGS)})
         options = {"error_on_fail": False, "printLevel": "none", "sparse": False, "enableRegularisation": False}
         return ca.conic("dcts_qp", "qpoases", qp, options)
 
     def _solve(self, data: dict[str, np.ndarray]) -> tuple[np.ndarray | None, int]:
-        """Solve the QP; if infeasible and a limit relaxation exists, solve again with it freed."""
-        assert self._solver is not None
-        ubx = data["ubx"]
-        for status, relax in ((STATUS_OK, False), (STATUS_LIMITS_RELAXED, True)):
-            if relax:
-                if self.law.qp is None or self.law.qp.relaxation is None:
-                    break
-                ubx = ubx.copy()
-                ubx[self.law.qp.relaxation] = np.inf
-            sol = self._solver(h=data["H"], g=data["f"], a=data["A"], lba=data["lba"], uba=data["uba"], lbx=data["lbx"], ubx=ubx)
-            if self._solver.stats()["success"]:
-                return np.array(sol["x"]).ravel(), status
+        """Solve the QP; if it is infeasible, solve it again with the limits relaxed."""
+        assert self._solver is not None and self.law.qp is not None
+        names = ("H", "f", "A", "lba", "uba", "lbx", "ubx")
+        H, f, A, lba, uba, lbx, ubx = (data[k] if k in ("H", "A") else data[k].ravel() for k in names)
+        sol = self._solver(h=H, g=f, a=A, lba=lba, uba=uba, lbx=lbx, ubx=ubx)
+        if self._solver.stats()["success"]:
+            return np.array(sol["x"]).ravel(), STATUS_OK
+        rows = self.law.qp.relaxable_rows
+        if not rows:
+            return None, STATUS_SOLVER_FAILED
+        H2, f2, A2, lba2, uba2, lbx2, ubx2 = relaxed_qp(H, f, A, lba, uba, lbx, ubx, rows)
+        if self._relaxed_solver is None:
+            self._relaxed_solver = self._make_solver(*A2.shape[::-1])
+        sol = self._relaxed_solver(h=H2, g=f2, a=A2, lba=lba2, uba=uba2, lbx=lbx2, ubx=ubx2)
+        if self._relaxed_solver.stats()["success"]:
+            return np.array(sol["x"]).ravel()[: self.nx], STATUS_LIMITS_RELAXED
         return None, STATUS_SOLVER_FAILED
 
     def fallback_torque(self, q: np.ndarray, dq: np.ndarray) -> np.ndarray:

@@ -5,13 +5,14 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import casadi as ca
+import numpy as np
 
 from .problem import ControlProblem
 
 INF = float("inf")
-# Penalty on the limit relaxation σ, relative to the largest curvature of the objective: σ is only
-# in play when the limits and the torque bounds cannot all hold, where it must dominate every task
-# weight; relative, so the Hessian stays as well conditioned as the formulation allows.
+# Penalty of each bound's relaxation slack, relative to the largest curvature of the objective:
+# the slacks only exist in the second solve, when the limits and the torque bounds cannot all
+# hold, where they must dominate every task weight.
 RELAXATION_WEIGHT = 1e3
 
 
@@ -31,8 +32,9 @@ class Affine:
 class QP:
     """min ½ xᵀHx + fᵀx  s.t.  lbx ≤ x ≤ ubx,  lba ≤ A x ≤ uba.
 
-    If `relaxation` is set, x[relaxation] is the limit relaxation σ ≥ 0: it is held at 0 in
-    the first solve and freed (its upper bound set to +inf) only if that solve is infeasible.
+    The last `relaxable_rows` rows are the joint/Cartesian acceleration bounds. If the QP is
+    infeasible (the torque limits cannot hold them all), it is solved again with each of those
+    bounds widened by its own slack, heavily penalized (`relaxed_qp`).
     """
 
     hessian: ca.SX
@@ -43,7 +45,7 @@ class QP:
     lbx: ca.SX
     ubx: ca.SX
     variables: list[str]
-    relaxation: int | None = None
+    relaxable_rows: int = 0
 
     @property
     def nx(self) -> int:
@@ -79,32 +81,38 @@ def with_limits(
     ubx: list,
     variables: list[str],
 ) -> tuple[QP, Affine]:
-    """Add the torque bounds, the joint/Cartesian acceleration bounds and the relaxation σ.
+    """Add the torque bounds and the joint/Cartesian acceleration bounds to an objective in x.
 
-    Each acceleration bound lo ≤ R a + r ≤ hi becomes two one-sided rows, R a + r − σ ≤ hi and
-    R a + r + σ ≥ lo, so a single σ widens every bound when the torque limits leave no choice.
-    Returns the QP and the torque as an affine map of the extended x.
+    Returns the QP and the torque as an affine map of x.
     """
-    nx = len(variables) + 1
-    sigma = len(variables)
-    G = ca.horzcat(acceleration.matrix, ca.SX.zeros(problem.n, 1))
-    torque = Affine(problem.torque(acceleration.offset), ca.mtimes(problem.mass_matrix, G))
-
+    torque = Affine(problem.torque(acceleration.offset), ca.mtimes(problem.mass_matrix, acceleration.matrix))
     rows = problem.acceleration_rows
-    R_G = ca.mtimes(rows.matrix, G)
     R_c = ca.mtimes(rows.matrix, acceleration.offset) + rows.offset
-    e_sigma = ca.SX.zeros(1, nx)
-    e_sigma[0, sigma] = 1.0
-    ones = ca.SX.ones(len(rows), 1)
-    upper_rows = R_G - ca.mtimes(ones, e_sigma)
-    lower_rows = R_G + ca.mtimes(ones, e_sigma)
     tau_max = ca.DM(problem.torque_max)
-    A = ca.vertcat(torque.matrix, upper_rows, lower_rows)
-    lba = ca.vertcat(-tau_max - torque.offset, -INF * ones, rows.lower - R_c)
-    uba = ca.vertcat(tau_max - torque.offset, rows.upper - R_c, INF * ones)
-
-    largest = ca.mmax(ca.fabs(ca.diag(hessian))) if len(variables) else ca.SX(1.0)
-    H = ca.diagcat(hessian, RELAXATION_WEIGHT * largest)
-    f = ca.vertcat(gradient, 0.0)
-    qp = QP(H, f, A, lba, uba, ca.vertcat(*lbx, 0.0), ca.vertcat(*ubx, 0.0), [*variables, "sigma"], sigma)
+    A = ca.vertcat(torque.matrix, ca.mtimes(rows.matrix, acceleration.matrix))
+    lba = ca.vertcat(-tau_max - torque.offset, rows.lower - R_c)
+    uba = ca.vertcat(tau_max - torque.offset, rows.upper - R_c)
+    qp = QP(hessian, gradient, A, lba, uba, ca.vertcat(*lbx), ca.vertcat(*ubx), variables, len(rows))
     return qp, torque
+
+
+def relaxed_qp(H, f, A, lba, uba, lbx, ubx, relaxable_rows: int):
+    """The QP data with each of the last `relaxable_rows` rows widened by a slack sᵣ ≥ 0.
+
+    Variables (x, s); objective ½xᵀHx + fᵀx + ½ρ‖s‖² with ρ = RELAXATION_WEIGHT · max|H_ii|;
+    a relaxable row lo ≤ aᵀx ≤ hi becomes aᵀx − sᵣ ≤ hi and aᵀx + sᵣ ≥ lo, so every bound is
+    violated only as much as the torque limits force it to be. NumPy in and out (the generated
+    C does the same on its arrays).
+    """
+    nx, r = H.shape[0], relaxable_rows
+    fixed = A.shape[0] - r
+    rho = RELAXATION_WEIGHT * max(1.0, float(np.max(np.abs(np.diag(H))))) if nx else RELAXATION_WEIGHT
+    H2 = np.zeros((nx + r, nx + r))
+    H2[:nx, :nx] = H
+    H2[nx:, nx:] = rho * np.eye(r)
+    slack = np.eye(r)
+    A2 = np.block([[A[:fixed], np.zeros((fixed, r))], [A[fixed:], -slack], [A[fixed:], slack]])
+    inf = np.full(r, INF)
+    lba2 = np.concatenate([lba[:fixed], -inf, lba[fixed:]])
+    uba2 = np.concatenate([uba[:fixed], uba[fixed:], inf])
+    return H2, np.concatenate([f, np.zeros(r)]), A2, lba2, uba2, np.concatenate([lbx, np.zeros(r)]), np.concatenate([ubx, inf])

@@ -28,9 +28,11 @@ def _upper_from_position(x, v, x_max, dt):
     end_of_step = 2.0 * (x_max - x - dt * v) / dt**2
     stop = -v / dt
     # Moving toward x_max (v > 0) and braking: the maximum is at t* = −v/a; inside the step
-    # (a < −v/dt) it is x − v²/(2a), which must stay ≤ x_max.
+    # (a < −v/dt) it is x − v²/(2a), which must stay ≤ x_max. Already beyond x_max (a slight
+    # overshoot from integration) there is no apex to keep inside: the end of the step decides.
     apex = -(v**2) / (2.0 * ca.fmax(x_max - x, _TINY))
-    return ca.if_else(ca.logic_and(v > 0, end_of_step < stop), apex, end_of_step)
+    inside_apex = ca.logic_and(ca.logic_and(v > 0, end_of_step < stop), x < x_max)
+    return ca.if_else(inside_apex, apex, end_of_step)
 
 
 def _upper_from_viability(x, v, x_max, braking, dt):
