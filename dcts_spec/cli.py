@@ -76,6 +76,100 @@ def schema(
         typer.echo(f"wrote {output}")
 
 
+_RUNTIME_HELP = "controller in the loop: c (the generated C bundle) or python (CasADi from Python)"
+
+
+@app.command()
+def simulate(
+    file: Annotated[Path, typer.Argument(help="spec file with a `scenario` section")],
+    out: Annotated[Optional[Path], typer.Option("--out", "-o", help="output directory (default: runs/<name>)")] = None,
+    runtime: Annotated[str, typer.Option(help=_RUNTIME_HELP)] = "c",
+    formulation: Annotated[Optional[str], typer.Option(help="override controller.formulation")] = None,
+    duration: Annotated[Optional[float], typer.Option(help="override scenario.duration, in s")] = None,
+    plots: Annotated[bool, typer.Option("--plots/--no-plots", help="write the PNG plots")] = True,
+    viewer: Annotated[bool, typer.Option("--viewer", help="watch the run in MuJoCo's viewer (needs a display)")] = False,
+    video: Annotated[Optional[Path], typer.Option(help="render the run offscreen to this MP4 file")] = None,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="no progress bar, no summary")] = False,
+) -> None:
+    """Run the compiled controller against MuJoCo through the spec's scenario; write log, summary, plots."""
+    from .sim.display import choose_gl_backend
+
+    if video is not None:
+        choose_gl_backend()  # before MuJoCo is imported
+    from .sim.commands import RunOptions, simulate_command
+
+    options = RunOptions(runtime=runtime, duration=duration, quiet=quiet)
+    raise typer.Exit(simulate_command(file, out, options, formulation, plots, viewer, video))
+
+
+@app.command()
+def compare(
+    file: Annotated[Path, typer.Argument(help="spec file with a `scenario` section")],
+    formulations: Annotated[str, typer.Option(help="comma-separated formulations to run")] = "dcts,osc,qp_md",
+    out: Annotated[Optional[Path], typer.Option("--out", "-o", help="output directory (default: runs/<name>-compare)")] = None,
+    runtime: Annotated[str, typer.Option(help=_RUNTIME_HELP)] = "c",
+    duration: Annotated[Optional[float], typer.Option(help="override scenario.duration, in s")] = None,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="no progress bar, no table")] = False,
+) -> None:
+    """Run the same scenario with several formulations; write a metrics table and overlay plots."""
+    from .sim.commands import RunOptions, compare_command
+
+    names = [f.strip() for f in formulations.split(",") if f.strip()]
+    options = RunOptions(runtime=runtime, duration=duration, quiet=quiet)
+    raise typer.Exit(compare_command(file, out, options, names))
+
+
+@app.command("compile")
+def compile_(
+    file: Annotated[Path, typer.Argument(help="spec file")],
+    output: Annotated[Path, typer.Option("-o", "--output", help="bundle directory (written atomically)")],
+    formulation: Annotated[Optional[str], typer.Option(help="override controller.formulation")] = None,
+    no_build: Annotated[bool, typer.Option("--no-build", help="write the sources only")] = False,
+    target: Annotated[str, typer.Option(help="host, or cortex-m7: also cross-compile and report flash/RAM")] = "host",
+    daqp_src: Annotated[Optional[Path], typer.Option(help="DAQP C sources (csrc/) for the firmware; default: "
+                                                     "PyPI's source distribution, cached")] = None,
+    qemu: Annotated[bool, typer.Option("--qemu/--no-qemu", help="cortex-m7: run the golden test on qemu")] = True,
+    warm_start: Annotated[bool, typer.Option("--warm-start", help="warm start DAQP from the previous step by "
+                                             "default (same optimum up to tolerances)")] = False,
+    as_json: Annotated[bool, typer.Option("--json", help="print the bundle's manifest")] = False,
+) -> None:
+    """Generate the C bundle of a spec (QP data, DAQP solve, header, build files, golden test) and build it."""
+    from .codegen import CodegenError, compile_bundle
+
+    try:
+        report = compile_bundle(file, output, formulation=formulation, build=not no_build, target=target,
+                                daqp_src=daqp_src, qemu=qemu, warm_start=warm_start)
+    except SpecError as error:
+        _fail(error)
+    except CodegenError as error:
+        typer.echo(f"error: {error}", err=True)
+        raise typer.Exit(1)
+    typer.echo(json.dumps(report.manifest, indent=2) if as_json else "\n".join(report.lines()))
+
+
+@app.command()
+def bench(
+    file: Annotated[Path, typer.Argument(help="spec file")],
+    as_json: Annotated[bool, typer.Option("--json", help="machine-readable output")] = False,
+    formulation: Annotated[Optional[str], typer.Option(help="override controller.formulation")] = None,
+    states: Annotated[int, typer.Option(help="states timed in C (per state set)")] = 10000,
+    python_states: Annotated[int, typer.Option(help="states timed in the Python runtime")] = 500,
+) -> None:
+    """Time the generated C step (data and solve), the Python runtime and Pinocchio's dynamics terms."""
+    from .codegen import CodegenError
+    from .codegen.bench import bench as run_bench
+    from .codegen.bench import format_report
+
+    try:
+        result = run_bench(file, formulation=formulation, states=states, python_states=python_states)
+    except SpecError as error:
+        _fail(error)
+    except CodegenError as error:
+        typer.echo(f"error: {error}", err=True)
+        raise typer.Exit(1)
+    typer.echo(json.dumps(result, indent=2) if as_json else format_report(result))
+
+
 def main() -> None:
     """Entry point: no Python traceback reaches the user unless DCTS_DEBUG is set."""
     try:

@@ -66,6 +66,7 @@ def build_mujoco_spec(
     integrator: str = "implicitfast",
     payloads: Sequence[Payload] = (),
     geometry: pin.GeometryModel | None = None,
+    scenery: bool = False,
 ) -> mujoco.MjSpec:
     """MuJoCo spec of a fixed-base Pinocchio model, to extend (floor, cameras) before compiling.
 
@@ -117,6 +118,8 @@ def build_mujoco_spec(
         _add_capsules(model, bodies)
     else:
         _add_geometry(spec, geometry, bodies)
+    if scenery:
+        _add_scenery(spec)
     return spec
 
 
@@ -127,6 +130,7 @@ def build_mujoco_model(
     integrator: str = "implicitfast",
     payloads: Sequence[Payload] = (),
     geometry: pin.GeometryModel | None = None,
+    scenery: bool = False,
 ) -> mujoco.MjModel:
     """MuJoCo model of a fixed-base Pinocchio model with revolute and prismatic joints.
 
@@ -141,6 +145,8 @@ def build_mujoco_model(
     - ``geometry`` (a Pinocchio collision or visual model) gives the geoms: primitives and
       STL/OBJ meshes, other meshes (``.dae``) are skipped; without it, capsules join
       consecutive joint origins. Geoms never collide (contype = conaffinity = 0).
+    - ``scenery`` adds what a viewer or a video needs and the dynamics ignore: a
+      non-colliding checkered floor at z = 0, a light and a sky.
 
     Args:
         model: Fixed-base Pinocchio model.
@@ -148,13 +154,14 @@ def build_mujoco_model(
         integrator: ``"euler"``, ``"rk4"``, ``"implicit"`` or ``"implicitfast"``.
         payloads: Masses added to the MuJoCo model only.
         geometry: Geometry to display; mesh paths as resolved by Pinocchio's loaders.
+        scenery: Add a floor, a light and a sky for rendering.
 
     Raises:
         ValueError: On a joint that is neither revolute nor prismatic, an unknown
             integrator or payload frame, or a joint order MuJoCo cannot reproduce.
     """
     spec = build_mujoco_spec(
-        model, timestep=timestep, integrator=integrator, payloads=payloads, geometry=geometry
+        model, timestep=timestep, integrator=integrator, payloads=payloads, geometry=geometry, scenery=scenery
     )
     mj_model = spec.compile()
     _check_joint_order(model, mj_model)
@@ -295,6 +302,25 @@ def _add_geometry(spec: mujoco.MjSpec, geometry: pin.GeometryModel, bodies: list
         bodies[obj.parentJoint].add_geom(
             name=obj.name, pos=pos, quat=quat, rgba=obj.meshColor, contype=0, conaffinity=0, **kwargs
         )
+
+
+def _add_scenery(spec: mujoco.MjSpec) -> None:
+    """A checkered floor (no collisions), a light from above and a gradient sky."""
+    spec.add_texture(
+        name="sky", type=mujoco.mjtTexture.mjTEXTURE_SKYBOX, builtin=mujoco.mjtBuiltin.mjBUILTIN_GRADIENT,
+        rgb1=[0.55, 0.7, 0.85], rgb2=[0.1, 0.12, 0.15], width=256, height=256,
+    )
+    spec.add_texture(
+        name="floor", type=mujoco.mjtTexture.mjTEXTURE_2D, builtin=mujoco.mjtBuiltin.mjBUILTIN_CHECKER,
+        rgb1=[0.32, 0.34, 0.36], rgb2=[0.24, 0.26, 0.28], width=256, height=256,
+    )
+    material = spec.add_material(name="floor", texrepeat=[8, 8], reflectance=0.1)
+    material.textures[mujoco.mjtTextureRole.mjTEXROLE_RGB] = "floor"
+    spec.worldbody.add_geom(
+        name="floor", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[3.0, 3.0, 0.05], material="floor",
+        contype=0, conaffinity=0,
+    )
+    spec.worldbody.add_light(name="sun", pos=[0.5, -0.5, 3.0], dir=[-0.1, 0.1, -1.0], castshadow=True)
 
 
 def _check_joint_order(model: pin.Model, mj_model: mujoco.MjModel) -> None:

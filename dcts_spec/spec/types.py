@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 from typing import Annotated, Any
 
-from pydantic import AllowInfNan, BaseModel, ConfigDict, PlainValidator, Strict, WithJsonSchema
+from pydantic import AllowInfNan, BaseModel, ConfigDict, PlainSerializer, PlainValidator, Strict, WithJsonSchema
 
 
 class FieldError(ValueError):
@@ -68,15 +68,24 @@ _LIST_SCHEMA = {"type": "array", "items": _NUMBER_SCHEMA, "minItems": 1}
 Number = Annotated[float, Strict(), AllowInfNan(False)]
 # Strict: YAML reads `yes`/`on` as true, and a lax int would take true (and "1") as 1.
 Integer = Annotated[int, Strict()]
-NumberList = Annotated[tuple[float, ...], PlainValidator(_number_list), WithJsonSchema(_LIST_SCHEMA)]
+def _serialize(value: Any) -> Any:
+    """Vectors serialize as lists (however they were stored)."""
+    return list(value) if isinstance(value, (list, tuple)) else value
+
+
+_AS_LIST = PlainSerializer(_serialize)
+
+NumberList = Annotated[tuple[float, ...], PlainValidator(_number_list), _AS_LIST, WithJsonSchema(_LIST_SCHEMA)]
 ScalarOrVector = Annotated[
     float | tuple[float, ...],
     PlainValidator(_scalar_or_list),
+    _AS_LIST,
     WithJsonSchema({"anyOf": [_NUMBER_SCHEMA, _LIST_SCHEMA], "description": "one value for all, or one per joint/axis"}),
 ]
 Vec3 = Annotated[
     tuple[float, float, float],
     PlainValidator(_vec3),
+    _AS_LIST,
     WithJsonSchema({"type": "array", "items": _NUMBER_SCHEMA, "minItems": 3, "maxItems": 3}),
 ]
 

@@ -1,0 +1,122 @@
+"""The summary of a run: limit violations, task errors, energies, solver health, speed.
+
+Definitions (N samples t_k = k T; violations are 0 when a limit holds or does not exist):
+- max_joint_position_violation = max_{k,j} max(0, q_j − q_max,j, q_min,j − q_j), rad
+- max_joint_velocity_violation = max_{k,j} max(0, |q̇_j| − q̇_max,j), rad/s; `_ratio`: over q̇_max,j
+- max_torque_violation = max_{k,j} max(0, |τ_j| − τ_max,j), Nm (τ as applied)
+- max_cartesian_violation = max over bounds and samples of the distance outside [c_min, c_max], m
+- solver_failures = #{k: status_k < 0}; limits_relaxed = #{k: status_k = 1}
+- min_scaling = min over samples and levels of the task scalings
+- task_rms_error[t] = sqrt(mean_k ‖Δx_t,k‖²), task_mean_error[t] = mean_k ‖Δx_t,k‖ (SI units)
+- mean_acceleration_error[p] = mean_k ‖J_p a_k + J̇_p q̇_k − ẍ_d,p,k‖ with the actual acceleration
+  a_k = (q̇_{k+1} − q̇_k)/T; primary_mean_acceleration_error is the one of the first priority
+- acceleration_energy_integral = Σ_k ½(τ_k − g_k)ᵀM_k⁻¹(τ_k − g_k) T
+- kinetic_energy_peak = max_k ½q̇ᵀMq̇, split M-orthogonally into task_space_kinetic_energy_peak
+  (max_k ½ẋᵀΛẋ, all levels' Jacobians stacked, Λ = (J M⁻¹ Jᵀ)⁺) and null_space_kinetic_energy_peak
+  (max_k of the rest)
+- waypoints_reached = points reached (None without waypoints); waypoint_times: when each was, or None
+- realtime_factor = simulated time / wall time of the simulation loop (controller, physics and
+  logging; not the viewer, video or progress display)
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from ..controller import STATUS_LIMITS_RELAXED
+from ..robot.model import Robot
+from ..sim.log import SimulationLog
+from .series import TimeSeries
+
+SUMMARY_KEYS = (
+    "max_joint_position_violation",
+    "max_joint_velocity_violation",
+    "max_joint_velocity_violation_ratio",
+    "max_torque_violation",
+    "solver_failures",
+    "min_scaling",
+    "task_rms_error",
+    "primary_mean_acceleration_error",
+    "acceleration_energy_integral",
+    "task_space_kinetic_energy_peak",
+    "null_space_kinetic_energy_peak",
+    "realtime_factor",
+)
+
+
+def summarize(log: SimulationLog, series: TimeSeries, robot: Robot, priorities: list[int]) -> dict[str, Any]:
+    """The summary.json metrics of a run (see the module docstring for the definitions)."""
+    lim = robot.limits
+    velocity_excess = _excess(np.abs(log.dq), lim.v_max)
+    v_max = np.where(np.isfinite(lim.v_max), lim.v_max, np.inf)
+    acceleration_errors = {str(p): _mean_norm(series.acceleration_errors[p]) for p in priorities}
+    waypoints = log.waypoint_times
+    summary: dict[str, Any] = {
+        "duration": log.duration,
+        "steps": log.steps,
+        "completed": log.diverged_at is None,
+        "diverged_at": log.diverged_at,
+        "max_joint_position_violation": _peak(np.maximum(_excess(log.q, lim.q_max), _excess(-log.q, -lim.q_min))),
+        "max_joint_velocity_violation": _peak(velocity_excess),
+        "max_joint_velocity_violation_ratio": _peak(velocity_excess / v_max),
+        "max_torque_violation": _peak(_excess(np.abs(log.tau), lim.tau_max)),
+        "max_cartesian_violation": _cartesian_violation(series, robot),
+        "solver_failures": int(np.count_nonzero(log.status < 0)),
+        "limits_relaxed": int(np.count_nonzero(log.status == STATUS_LIMITS_RELAXED)),
+        "min_scaling": _peak(log.scaling, np.min, default=1.0),
+        "task_rms_error": {t: _rms_norm(e) for t, e in series.task_errors.items()},
+        "task_mean_error": {t: _mean_norm(e) for t, e in series.task_errors.items()},
+        "primary_mean_acceleration_error": acceleration_errors[str(priorities[0])],
+        "mean_acceleration_error": acceleration_errors,
+        "acceleration_energy_integral": float(np.sum(series.acceleration_energy) * log.period),
+        "kinetic_energy_peak": _peak(series.kinetic_energy),
+        "task_space_kinetic_energy_peak": _peak(series.task_kinetic_energy),
+        "null_space_kinetic_energy_peak": _peak(series.null_kinetic_energy),
+        "waypoints_total": int(waypoints.size),
+        "waypoints_reached": int(np.count_nonzero(np.isfinite(waypoints))) if waypoints.size else None,
+        "waypoint_times": [None if math.isnan(t) else float(t) for t in waypoints],
+        "wall_time": log.wall_time,
+        "realtime_factor": log.duration / log.wall_time if log.wall_time > 0 else None,
+    }
+    return summary
+
+
+def _excess(values: np.ndarray, bound: np.ndarray) -> np.ndarray:
+    """How far values are above bound (0 below it, and where the bound is infinite)."""
+    return np.maximum(values - np.where(np.isfinite(bound), bound, np.inf), 0.0)
+
+
+def _peak(values: np.ndarray, reduce=np.max, default: float = 0.0) -> float:
+    return float(reduce(values)) if values.size else default
+
+
+def _mean_norm(errors: np.ndarray) -> float:
+    return float(np.mean(np.linalg.norm(errors, axis=1))) if errors.size else 0.0
+
+
+def _rms_norm(errors: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(np.sum(errors**2, axis=1)))) if errors.size else 0.0
+
+
+def _cartesian_violation(series: TimeSeries, robot: Robot) -> float:
+    worst = 0.0
+    for b in robot.cartesian_bounds:
+        c = series.frame_positions[b.frame][:, b.axis]
+        worst = max(worst, _peak(np.maximum(_excess(c, np.array(b.c_max)), _excess(-c, -np.array(b.c_min)))))
+    return worst
+
+
+def json_ready(value: Any) -> Any:
+    """Non-finite floats become None (JSON has no NaN or ∞), numpy scalars Python numbers."""
+    if isinstance(value, dict):
+        return {str(k): json_ready(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [json_ready(v) for v in value]
+    if isinstance(value, np.generic):
+        value = value.item()
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value

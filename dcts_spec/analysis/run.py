@@ -1,0 +1,76 @@
+"""A finished run with everything derived from it: what plots, tables and files are made from."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..robot.model import Robot
+from ..sim.log import SimulationLog
+from ..sim.runner import Simulation
+from ..tasks import CartesianTask, make_task
+from .metrics import json_ready, summarize
+from .series import TimeSeries, evaluate
+
+
+@dataclass
+class RunResult:
+    """A run's log, derived time series and summary, with what is needed to label them."""
+
+    label: str  # e.g. the formulation
+    robot: Robot
+    log: SimulationLog
+    series: TimeSeries
+    summary: dict[str, Any]
+    priorities: list[int]
+    row_names: dict[str, tuple[str, ...]]  # task → names of its error rows
+    waypoint_frame: str | None = None
+    waypoint_positions: np.ndarray | None = None  # (P, 3) world points of a position waypoint path
+
+    def save_log(self, path: Path) -> None:
+        """log.npz: the log's arrays, the derived series, and names to read them by."""
+        np.savez_compressed(
+            path,
+            **self.log.arrays(),
+            **self.series.arrays(),
+            period=self.log.period,
+            joint_names=np.array(self.robot.joint_names),
+            task_names=np.array(list(self.row_names)),
+            priorities=np.array(self.priorities),
+            frames=np.array(list(self.series.frame_positions)),
+        )
+
+    def save_summary(self, path: Path) -> None:
+        path.write_text(json.dumps(json_ready(self.summary), indent=2) + "\n", encoding="utf-8")
+
+
+def analyze(sim: Simulation, log: SimulationLog, label: str | None = None) -> RunResult:
+    """Derive the time series and the summary of a finished run of `sim`."""
+    spec, robot = sim.spec, sim.robot
+    series = evaluate(spec, robot, log)
+    priorities = list(sim.runtime.priorities)
+    summary = {
+        "spec": spec.name,
+        "formulation": sim.formulation,
+        "runtime": sim.runtime_kind,
+        "period": sim.scenario.period,
+        "substeps": sim.scenario.substeps,
+        "integrator": sim.scenario.integrator,
+        "external_torque_sensing": sim.scenario.sensing.mode,
+        "mass_scale": sim.scenario.mass_scale,
+        **summarize(log, series, robot, priorities),
+    }
+    tasks = [make_task(t, robot) for t in spec.tasks]
+    result = RunResult(label or sim.formulation, robot, log, series, summary, priorities,
+                       {t.name: t.row_names for t in tasks})
+    follower = sim.waypoints
+    if follower is not None and isinstance(follower.task, CartesianTask):
+        fields = [f for f, _, _ in follower.slices]
+        if "position" in fields:
+            result.waypoint_frame = follower.task.frame
+            result.waypoint_positions = np.array([p[:3] for p in follower.points])
+    return result

@@ -1,0 +1,106 @@
+"""Quantities derived from a simulation log after the run, for all samples at once.
+
+One CasADi function of (q, q̇, ref, a) — task errors, task-acceleration errors, frame
+positions, M, g and the stacked task Jacobian — is mapped over the samples; the energies
+are then batched NumPy linear algebra. Everything uses the simulated robot's rigid-body
+model (true masses, no payloads): the payloads and the controller's model errors are what
+is being measured against.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+
+from ..formulations import ControlProblem, build_problem
+from ..robot.model import Robot
+from ..sim.log import SimulationLog
+from ..spec import Spec
+from ..tasks import CartesianTask
+
+PINV_RCOND = 1e-10  # relative cut-off of the pseudo-inverse of J M⁻¹ Jᵀ
+
+
+@dataclass
+class TimeSeries:
+    """Per-sample derived quantities, aligned with the log."""
+
+    task_errors: dict[str, np.ndarray]  # task → (N, m) Δx
+    acceleration_errors: dict[int, np.ndarray]  # priority → (N, m) J a + J̇q̇ − ẍ_d
+    frame_positions: dict[str, np.ndarray]  # frame → (N, 3), Cartesian task and bound frames
+    kinetic_energy: np.ndarray  # ½ q̇ᵀ M q̇
+    task_kinetic_energy: np.ndarray  # ½ ẋᵀ Λ ẋ, all task rows stacked
+    null_kinetic_energy: np.ndarray  # the rest
+    acceleration_energy: np.ndarray  # ½ (τ − g)ᵀ M⁻¹ (τ − g)
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """Flat name → array, for saving next to the log."""
+        out = {f"error_{k}": v for k, v in self.task_errors.items()}
+        out |= {f"acceleration_error_{k}": v for k, v in self.acceleration_errors.items()}
+        out |= {f"position_{k}": v for k, v in self.frame_positions.items()}
+        for name in ("kinetic_energy", "task_kinetic_energy", "null_kinetic_energy", "acceleration_energy"):
+            out[name] = getattr(self, name)
+        return out
+
+
+def evaluate(spec: Spec, robot: Robot, log: SimulationLog) -> TimeSeries:
+    """Derived time series of a run of `spec` on `robot` (the simulated robot)."""
+    problem = build_problem(spec, robot)
+    n, samples = problem.n, log.steps
+    a = ca.SX.sym("a", n)
+    levels = problem.levels
+    frames = _cartesian_frames(robot, problem)
+    jacobian = ca.vertcat(*[lv.jacobian for lv in levels])
+    outputs = {
+        "error": ca.vertcat(*[lv.error for lv in levels]),
+        "acceleration_error": ca.vertcat(*[ca.mtimes(lv.jacobian, a) + lv.bias - lv.target for lv in levels]),
+        "position": ca.vertcat(*[problem.sym.frame_placement(f)[0] for f in frames]) if frames else ca.SX(0, 1),
+        "M": ca.reshape(problem.mass_matrix, n * n, 1),
+        "g": problem.gravity,
+        "J": ca.reshape(jacobian, jacobian.numel(), 1),
+    }
+    function = ca.Function("series", [problem.q, problem.dq, problem.ref, a], list(outputs.values()))
+    if samples == 0:
+        values = [np.zeros((samples, int(v.numel()))) for v in outputs.values()]
+    else:
+        mapped = function.map(samples, "thread", 2)
+        values = [np.array(v).T for v in mapped(log.q.T, log.dq.T, log.ref.T, log.ddq.T)]
+    out = dict(zip(outputs, values, strict=True))
+
+    task_errors, acceleration_errors, row = {}, {}, 0
+    for lv in levels:
+        acceleration_errors[lv.priority] = out["acceleration_error"][:, row: row + lv.dim]
+        for task in lv.tasks:
+            task_errors[task.name] = out["error"][:, row: row + task.dim]
+            row += task.dim
+    positions = {f: out["position"][:, 3 * i: 3 * i + 3] for i, f in enumerate(frames)}
+
+    # CasADi reshapes column-major: the flat vector holds the columns one after the other.
+    M = out["M"].reshape(samples, n, n).transpose(0, 2, 1)
+    m = jacobian.shape[0]
+    J = out["J"].reshape(samples, n, m).transpose(0, 2, 1)
+    kinetic, task_kinetic = _kinetic_energies(M, J, log.dq)
+    effort = log.tau - out["g"]
+    acceleration_energy = 0.5 * np.einsum("ki,ki->k", effort, np.linalg.solve(M, effort[..., None])[..., 0])
+    return TimeSeries(task_errors, acceleration_errors, positions, kinetic, task_kinetic,
+                      kinetic - task_kinetic, acceleration_energy)
+
+
+def _kinetic_energies(M: np.ndarray, J: np.ndarray, dq: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """T = ½q̇ᵀMq̇ and its task part ½ẋᵀΛẋ, Λ = (J M⁻¹ Jᵀ)⁺ (an M-orthogonal split of T)."""
+    kinetic = 0.5 * np.einsum("ki,kij,kj->k", dq, M, dq)
+    if J.shape[1] == 0:
+        return kinetic, np.zeros_like(kinetic)
+    inverse_jt = np.linalg.solve(M, J.transpose(0, 2, 1))
+    operational = np.linalg.pinv(J @ inverse_jt, rcond=PINV_RCOND, hermitian=True)
+    velocity = np.einsum("kij,kj->ki", J, dq)
+    return kinetic, 0.5 * np.einsum("ki,kij,kj->k", velocity, operational, velocity)
+
+
+def _cartesian_frames(robot: Robot, problem: ControlProblem) -> list[str]:
+    """Frames of the Cartesian tasks and bounds, in order of appearance."""
+    frames = [t.frame for lv in problem.levels for t in lv.tasks if isinstance(t, CartesianTask)]
+    frames += [b.frame for b in robot.cartesian_bounds]
+    return list(dict.fromkeys(frames))

@@ -1,0 +1,328 @@
+"""`dcts bench`: time the generated C controller, the Python runtime and Pinocchio's dynamics.
+
+The C controller is timed by a C harness (no Python in the loop), compiled with -O2
+-march=native, over states along closed-loop motions (the order a control loop sees, so the
+QP warm start is realistic) and over independent random states. Pinocchio's numeric dynamics
+terms (computeAllTerms + the task frames' Jacobians) on the same states are the reference a
+hand-written controller would start from.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import shutil
+import subprocess
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import pinocchio
+
+from ..controller import STATUS_NAMES
+from ..tasks.cartesian import CartesianTask
+from .build import CACHE_DIR, _tail, compile_bundle, make_controller, run
+from .bundle import CodegenError, render, template, version
+from .loader import load_bundle
+from .states import State, StateSampler, trajectory_states
+
+NATIVE = ["-O2", "-march=native"]
+
+
+def _write_states(path: Path, states: list[State]) -> None:
+    rows = np.array([np.concatenate([s.q, s.dq, s.tau_ext, s.ref]) for s in states], dtype=np.float64)
+    with open(path, "wb") as f:
+        f.write(np.int32(len(states)).tobytes())
+        f.write(rows.tobytes())
+
+
+def _stats(ns: np.ndarray) -> dict[str, float]:
+    us = np.asarray(ns, dtype=float) / 1e3
+    return {"median_us": float(np.median(us)), "p99_us": float(np.percentile(us, 99)), "max_us": float(us.max()),
+            "mean_us": float(us.mean())}
+
+
+def _cc() -> str:
+    return os.environ.get("CC") or ("gcc" if shutil.which("gcc") else "cc")
+
+
+def build_c_harness(bundle: Path, manifest: dict, work: Path, optimization: list[str] = NATIVE, suffix: str = "") -> Path:
+    """The bench harness with the controller sources, all compiled with `optimization`."""
+    name = manifest["name"]
+    values = {
+        "name": name, "NAME": name.upper(), "VERSION": version(),
+        "SZ_ARG": max(manifest["casadi_work"]["sz_arg"], 1), "SZ_RES": max(manifest["casadi_work"]["sz_res"], 11),
+        "SZ_IW": max(manifest["casadi_work"]["sz_iw"], 1), "SZ_W": max(manifest["casadi_work"]["sz_w"], 1),
+    }
+    source = work / f"{name}_bench.c"
+    source.write_text(render(template("bench.c.in"), values))
+    exe = work / f"{name}_bench{suffix}"
+    flags = ["-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", *optimization]
+    daqp = []
+    if manifest["nx"]:
+        flags.append(f"-I{manifest['daqp']['include']}")
+        daqp = [manifest["daqp"]["library"]]
+    run([_cc(), *flags, f"-I{bundle}", "-o", str(exe), str(source), str(bundle / f"{name}.c"),
+         str(bundle / f"{name}_casadi.c"), *daqp, "-lm"], work, "bench harness build")
+    return exe
+
+
+REPEATS = 3  # each configuration runs this often; the run with the lowest median step counts
+
+
+def run_c_harness(exe: Path, states: list[State], work: Path, tag: str, warm: bool = True) -> dict:
+    states_file, out = work / f"states_{tag}.bin", work / f"times_{tag}.bin"
+    _write_states(states_file, states)
+    count = len(states)
+    best, raw = None, b""
+    for _ in range(REPEATS):  # a shared machine: keep the least disturbed run
+        run([str(exe), str(states_file), str(out), str(int(warm))], work, "bench harness", timeout=1800)
+        this = out.read_bytes()
+        median = float(np.median(np.frombuffer(this[: 8 * count], dtype=np.int64)))
+        if best is None or median < best:
+            best, raw = median, this
+    i64 = np.frombuffer(raw[: 24 * count], dtype=np.int64).reshape(3, count)
+    i32 = np.frombuffer(raw[24 * count:], dtype=np.int32).reshape(3, count)
+    step, data, gravity = i64
+    status, solves, iterations = i32
+    solve = np.maximum(step - data, 0)
+    return {
+        "states": count,
+        "runs": REPEATS,
+        "step": _stats(step),
+        "qp_data": _stats(data),
+        "solve_and_rest": _stats(solve),
+        "gravity": _stats(gravity),
+        "statuses": {STATUS_NAMES.get(int(s), str(int(s))): int((status == s).sum()) for s in np.unique(status)},
+        "qp_solves_max": int(solves.max()),
+        "qp_iterations": {"mean": float(iterations.mean()), "max": int(iterations.max()),
+                          "p99": float(np.percentile(iterations, 99))},
+    }
+
+
+def callgrind_instructions(exe: Path, states: list[State], work: Path, name: str) -> float | None:
+    """Instructions per step (callgrind, counting only inside <name>_step)."""
+    if shutil.which("valgrind") is None:
+        return None
+    states_file, out = work / "states_callgrind.bin", work / "times_callgrind.bin"
+    _write_states(states_file, states)
+    log = work / "callgrind.out"
+    run(["valgrind", "--tool=callgrind", f"--callgrind-out-file={log}", f"--toggle-collect={name}_step",
+         str(exe), str(states_file), str(out)], work, "callgrind", timeout=1800)
+    summary = next((line for line in log.read_text().splitlines() if line.startswith(("summary:", "totals:"))), None)
+    if summary is None:
+        return None
+    return int(summary.split()[1]) / (2 * len(states))  # the harness runs the steps twice
+
+
+def pinocchio_reference(controller, states: list[State], work: Path) -> dict:
+    """computeAllTerms + frame Jacobians of the task frames: a C++ harness against the pip-installed
+    Pinocchio if it builds, otherwise timed from Python (and said so)."""
+    frames = sorted({t.frame for lv in controller.problem.levels for t in lv.tasks if isinstance(t, CartesianTask)})
+    model = controller.robot.model
+    model_file = work / "model.bin"
+    model.saveToBinary(str(model_file))
+    prefix = _cmeel_prefix()
+    eigen = Path(__import__("casadi").__file__).parent / "include" / "eigen3"
+    cxx = os.environ.get("CXX") or ("g++" if shutil.which("g++") else "c++")
+    source = template("pinocchio_bench.cpp")
+    # The harness takes ~20 s to compile: keep it, keyed by its source and Pinocchio's version.
+    key = hashlib.sha256(f"{source}{pinocchio.__version__}{prefix}{cxx}".encode()).hexdigest()[:16]
+    exe = CACHE_DIR / "pinocchio_bench" / key / "pinocchio_bench"
+    (work / "pinocchio_bench.cpp").write_text(source)
+    error = None
+    if prefix is not None and not exe.is_file():
+        exe.parent.mkdir(parents=True, exist_ok=True)
+        try:
+            # The flags Pinocchio's CMake config exports; no -march=native: the harness must keep
+            # the Eigen alignment of the prebuilt library (mixing them crashes in free()).
+            defines = ["-DBOOST_MPL_LIMIT_LIST_SIZE=30", "-DBOOST_MPL_LIMIT_VECTOR_SIZE=30",
+                       "-DBOOST_MPL_CFG_NO_PREPROCESSED_HEADERS", "-DBOOST_FUSION_INVOKE_MAX_ARITY=12",
+                       "-DPINOCCHIO_ENABLE_TEMPLATE_INSTANTIATION", "-DNDEBUG"]
+            partial = exe.with_name(f"{exe.name}.{os.getpid()}")
+            run([cxx, "-std=c++17", "-O2", *defines, f"-I{prefix / 'include'}", f"-I{eigen}",
+                 "-o", str(partial), str(work / "pinocchio_bench.cpp"), f"-L{prefix / 'lib'}",
+                 "-lpinocchio_default", "-lboost_serialization", f"-Wl,-rpath,{prefix / 'lib'}"],
+                work, "Pinocchio harness build", timeout=900)
+            os.replace(partial, exe)
+        except CodegenError as exc:
+            error = str(exc).splitlines()[0]
+    elif prefix is None:
+        error = "Pinocchio's C++ headers not found"
+    if error is None:
+        states_file, out = work / "states_pin.bin", work / "times_pin.bin"
+        _write_states(states_file, states)
+        env = dict(os.environ, DCTS_NREF=str(controller.ref_size))
+        done = subprocess.run([str(exe), str(model_file), str(states_file), str(out), *frames], cwd=work,
+                              capture_output=True, text=True, env=env, timeout=1800)
+        if done.returncode == 0:
+            ns = np.frombuffer(out.read_bytes(), dtype=np.int64)
+            return {"how": "C++ harness calling the pip-installed Pinocchio "
+                           f"{pinocchio.__version__} (its precompiled algorithms)", "frames": frames, **_stats(ns)}
+        error = f"Pinocchio harness failed: {_tail(done.stderr, 3)}"
+    # Fallback: from Python (includes the binding overhead)
+    data = model.createData()
+    ids = [model.getFrameId(f) for f in frames]
+    ns = []
+    for s in states[:2000]:
+        t0 = time.perf_counter_ns()
+        pinocchio.computeAllTerms(model, data, s.q, s.dq)
+        for fid in ids:
+            pinocchio.getFrameJacobian(model, data, fid, pinocchio.LOCAL_WORLD_ALIGNED)
+        ns.append(time.perf_counter_ns() - t0)
+    return {"how": f"timed from Python (binding overhead included; {error})", "frames": frames, **_stats(np.array(ns))}
+
+
+def _cmeel_prefix() -> Path | None:
+    for parent in Path(pinocchio.__file__).resolve().parents:
+        candidate = parent / "cmeel.prefix"
+        if (candidate / "include" / "pinocchio").is_dir():
+            return candidate
+        if parent.name == "site-packages":
+            break
+    import site
+
+    for base in site.getsitepackages():
+        candidate = Path(base) / "cmeel.prefix"
+        if (candidate / "include" / "pinocchio").is_dir():
+            return candidate
+    return None
+
+
+def python_runtime(controller, states: list[State]) -> dict:
+    ns = []
+    controller._last_gravity = np.zeros(controller.n)
+    for s in states:
+        t0 = time.perf_counter_ns()
+        controller.step(s.q, s.dq, s.tau_ext, s.ref if controller.ref_size else None)
+        ns.append(time.perf_counter_ns() - t0)
+    return {"states": len(states), **_stats(np.array(ns))}
+
+
+def object_sizes(bundle: Path, manifest: dict, work: Path) -> dict:
+    """.text of the controller's objects (-O2 -fPIC as in the bundle) and of the shared library."""
+    name = manifest["name"]
+    sizes = {}
+    for stem in (name, f"{name}_casadi"):
+        obj = bundle / "build" / f"{stem}.o"
+        if obj.is_file():
+            sizes[f"{stem}.o"] = _section(obj, ".text")
+    lib = bundle / manifest["library"]
+    sizes[lib.name] = _section(lib, ".text")
+    return sizes
+
+
+def _section(path: Path, section: str) -> int:
+    output = run(["size", "-A", str(path)], path.parent, "size")
+    for line in output.splitlines():
+        parts = line.split()
+        if parts and parts[0] == section:
+            return int(parts[1])
+    return 0
+
+
+def bench(spec_file: str | Path, formulation: str | None = None, states: int = 10000, python_states: int = 500,
+          callgrind_states: int = 300, seed: int = 0, keep: str | Path | None = None) -> dict:
+    """Run the whole benchmark; returns a JSON-able dict (see `format_report`)."""
+    from ..spec import load_spec
+
+    if states < 1:
+        raise CodegenError("--states must be at least 1")
+    spec = load_spec(spec_file)
+    controller = make_controller(spec, formulation)
+    with tempfile.TemporaryDirectory(prefix="dcts-bench-") as tmp:
+        work = Path(keep) if keep else Path(tmp)
+        work.mkdir(parents=True, exist_ok=True)
+        bundle = work / "bundle"
+        if bundle.exists():
+            shutil.rmtree(bundle)
+        report = compile_bundle(spec, bundle, formulation=formulation, golden_count=128)
+        manifest = report.manifest
+        compiled = load_bundle(bundle)
+        t0 = time.perf_counter()
+        along = trajectory_states(controller, states, seed=seed, step=compiled.step)
+        sampler = StateSampler(controller, seed + 1)
+        independent = sampler.mixed(states, limit_fraction=0.15)
+        generation_s = time.perf_counter() - t0
+        compiled.close()
+
+        exe = build_c_harness(bundle, manifest, work)
+        c_traj = run_c_harness(exe, along, work, "trajectory", warm=True)
+        c_traj_cold = run_c_harness(exe, along, work, "trajectory_cold", warm=False)
+        c_rand = run_c_harness(exe, independent, work, "random", warm=True)
+        c_rand_cold = run_c_harness(exe, independent, work, "random_cold", warm=False)
+        py = python_runtime(controller, along[: min(python_states, len(along))])
+        pin_ref = pinocchio_reference(controller, along, work)
+        # valgrind does not decode every -march=native instruction (AVX-512): count on baseline x86-64
+        baseline = build_c_harness(bundle, manifest, work, ["-O2"], "_baseline")
+        instructions = callgrind_instructions(baseline, along[: min(callgrind_states, len(along))], work,
+                                              manifest["name"])
+        sizes = object_sizes(bundle, manifest, work)
+
+    host = manifest.get("host", {})
+    result = {
+        "spec": str(spec_file),
+        "name": manifest["name"],
+        "formulation": manifest["formulation"],
+        "sizes": {"nq": manifest["nq"], "nref": manifest["nref"], "nx": manifest["nx"], "na": manifest["na"],
+                  "nlevels": manifest["nlevels"]},
+        "compiler": f"{_cc()} {' '.join(NATIVE)}",
+        "c_step": {
+            "trajectory_warm": c_traj, "trajectory_cold": c_traj_cold,
+            "random_warm": c_rand, "random_cold": c_rand_cold,
+        },
+        "python_step": py,
+        "pinocchio_terms": pin_ref,
+        "ratio_c_step_to_pinocchio": c_traj_cold["step"]["median_us"] / pin_ref["median_us"],
+        "workspace_bytes": manifest["workspace_bytes_host"],
+        "daqp_init_heap_bytes": host.get("init_heap_bytes"),
+        "text_bytes": sizes,
+        "instructions_per_step": instructions,
+        "qp_data_instructions": manifest["qp_data_instructions"],
+        "state_generation_s": generation_s,
+    }
+    return result
+
+
+def format_report(r: dict) -> str:
+    s = r["sizes"]
+    lines = [
+        f"{r['name']} ({r['formulation']}): NQ={s['nq']} NREF={s['nref']} NX={s['nx']} NA={s['na']} "
+        f"NLEVELS={s['nlevels']}; C compiled with {r['compiler']}; best of "
+        f"{r['c_step']['trajectory_cold'].get('runs', 1)} runs per row",
+        "",
+        f"{'per step (µs)':<56}{'median':>9}{'p99':>9}{'max':>9}",
+    ]
+
+    def row(label: str, st: dict) -> None:
+        lines.append(f"{label:<56}{st['median_us']:>9.2f}{st['p99_us']:>9.2f}{st['max_us']:>9.2f}")
+
+    for key, label in (("trajectory_cold", "closed-loop states (default: cold start)"),
+                       ("trajectory_warm", "closed-loop states, warm start"),
+                       ("random_cold", "independent random states"),
+                       ("random_warm", "independent random states, warm start")):
+        c = r["c_step"][key]
+        row(f"C step, {label} ({c['states']})", c["step"])
+    c = r["c_step"]["trajectory_cold"]
+    row("  of which qp_data (CasADi-generated)", c["qp_data"])
+    row("  of which QP solve and the rest", c["solve_and_rest"])
+    row("  gravity (fallback only)", c["gravity"])
+    row(f"Python runtime step ({r['python_step']['states']} states)", r["python_step"])
+    row("Pinocchio computeAllTerms + frame Jacobians", r["pinocchio_terms"])
+    data_share = c["qp_data"]["median_us"] / c["step"]["median_us"]
+    lines += [
+        f"  Pinocchio: {r['pinocchio_terms']['how']}; frames {', '.join(r['pinocchio_terms']['frames']) or '-'}",
+        "",
+        f"ratio C step (closed loop, default) / Pinocchio terms, medians: {r['ratio_c_step_to_pinocchio']:.2f}",
+        f"the {'QP data' if data_share > 0.5 else 'QP solve'} dominates: qp_data is {100 * data_share:.0f}% of the median step",
+        f"QP: {c['qp_iterations']['mean']:.1f} DAQP iterations on average, max {c['qp_iterations']['max']}, "
+        f"at most {c['qp_solves_max']} solves per step; statuses {c['statuses']}",
+        f"workspace {r['workspace_bytes']} bytes, DAQP init heap {r['daqp_init_heap_bytes']} bytes",
+        ".text bytes: " + ", ".join(f"{k} {v}" for k, v in r["text_bytes"].items()),
+        "instructions per step (callgrind): "
+        + (f"{r['instructions_per_step']:.0f} (-O2, baseline x86-64)" if r["instructions_per_step"]
+           else "valgrind not installed"),
+    ]
+    return "\n".join(lines)
+

@@ -1,0 +1,394 @@
+"""Build a bundle: atomic output directory, host library and test, firmware images.
+
+`compile_bundle` writes into a temporary directory next to the requested one and renames it
+into place only when everything succeeded: the output directory is complete or not there.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import shutil
+import subprocess
+import sys
+import tarfile
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import casadi
+
+from ..controller import Controller
+from ..spec import Spec, load_spec
+from .bundle import GENERATOR, HEAP_SENTINEL, CodegenError, generate_sources
+
+DAQP_SDIST_VERSION = "0.11.0"
+CACHE_DIR = Path(os.environ.get("DCTS_CACHE", Path.home() / ".cache" / "dcts"))
+TARGETS = ("host", "cortex-m7")
+
+
+# -- toolchain -------------------------------------------------------------------------------------
+
+
+def casadi_daqp() -> tuple[Path, Path]:
+    """Headers and static library of the DAQP inside the casadi wheel (DAQP 0.5.x).
+
+    The archive's solver objects are position independent (only codegen.c.o, which the
+    controller does not use, is not), so they link into a shared library."""
+    root = Path(casadi.__file__).parent
+    include, library = root / "include" / "daqp", root / "libdaqpstat.a"
+    if not (include / "api.h").is_file() or not library.is_file():
+        raise CodegenError(f"DAQP not found in the casadi package at {root} (expected include/daqp and libdaqpstat.a)")
+    return include, library
+
+
+def daqp_sources(cache: Path | None = None, version: str = DAQP_SDIST_VERSION) -> Path:
+    """DAQP's C sources (csrc/ with include/ and src/) from its PyPI source distribution,
+    downloaded once into the cache with pip (never into the project)."""
+    cache = (cache or CACHE_DIR) / "daqp"
+    csrc = cache / f"daqp-{version}" / "csrc"
+    if (csrc / "src" / "api.c").is_file():
+        return csrc
+    cache.mkdir(parents=True, exist_ok=True)
+    archive = cache / f"daqp-{version}.tar.gz"
+    if not archive.is_file():
+        command = [sys.executable, "-m", "pip", "download", "--no-binary", ":all:", "--no-deps",
+                   f"daqp=={version}", "-d", str(cache)]
+        done = subprocess.run(command, capture_output=True, text=True)
+        if done.returncode != 0 or not archive.is_file():
+            raise CodegenError(f"could not download DAQP {version}'s sources with pip:\n{_tail(done.stdout + done.stderr)}")
+    with tarfile.open(archive) as tar:
+        members = [m for m in tar.getmembers() if m.name.startswith(f"daqp-{version}/csrc/") and (m.isfile() or m.isdir())]
+        tar.extractall(cache, members=members, filter="data")
+    if not (csrc / "src" / "api.c").is_file():
+        raise CodegenError(f"DAQP's source distribution has no csrc/src/api.c ({archive})")
+    return csrc
+
+
+def _tail(text: str, lines: int = 40) -> str:
+    return "\n".join(text.strip().splitlines()[-lines:])
+
+
+def run(command: list[str], cwd: Path, what: str, env: dict | None = None, timeout: float = 600) -> str:
+    """Run a build step; a failure raises CodegenError with the end of its output."""
+    try:
+        done = subprocess.run(command, cwd=cwd, capture_output=True, text=True, env=env, timeout=timeout)
+    except FileNotFoundError as exc:
+        raise CodegenError(f"{what}: {exc.filename} not found") from None
+    except subprocess.TimeoutExpired:
+        raise CodegenError(f"{what}: timed out after {timeout:.0f} s") from None
+    output = done.stdout + done.stderr
+    if done.returncode != 0:
+        raise CodegenError(f"{what} failed (exit code {done.returncode}):\n{_tail(output)}")
+    return output
+
+
+def make(directory: Path, targets: list[str], what: str, variables: dict[str, str] | None = None,
+         timeout: float = 600) -> str:
+    command = ["make", "-C", str(directory), f"-j{min(os.cpu_count() or 1, 8)}", *targets]
+    command += [f"{k}={v}" for k, v in (variables or {}).items()]
+    return run(command, directory, what, timeout=timeout)
+
+
+# -- output directory ------------------------------------------------------------------------------
+
+
+def _is_bundle(directory: Path) -> bool:
+    try:
+        return json.loads((directory / "manifest.json").read_text()).get("generator") == GENERATOR
+    except (OSError, ValueError):
+        return False
+
+
+def _check_output(out_dir: Path) -> None:
+    if out_dir.exists() and not out_dir.is_dir():
+        raise CodegenError(f"output path {out_dir} exists and is not a directory")
+    if out_dir.is_dir() and any(out_dir.iterdir()) and not _is_bundle(out_dir):
+        raise CodegenError(f"output directory {out_dir} is not empty and holds no dcts bundle: refusing to replace it")
+
+
+def _make_parents(directory: Path) -> list[Path]:
+    """Create missing parent folders; return those created (deepest last)."""
+    missing = []
+    for parent in [directory, *directory.parents]:
+        if parent.exists():
+            break
+        missing.append(parent)
+    created = []
+    for parent in reversed(missing):
+        try:
+            parent.mkdir()
+        except OSError as exc:
+            _remove_created(created)
+            raise CodegenError(f"cannot create {parent}: {exc.strerror}") from None
+        created.append(parent)
+    return created
+
+
+def _remove_created(created: list[Path]) -> None:
+    for parent in reversed(created):
+        try:
+            parent.rmdir()
+        except OSError:
+            pass
+
+
+def _install(tmp: Path, out_dir: Path) -> None:
+    """Rename the finished temporary directory into place (replacing an older bundle)."""
+    old = None
+    if out_dir.exists():
+        if any(out_dir.iterdir()):
+            old = out_dir.with_name(f".{out_dir.name}.old-{os.getpid()}")
+            os.rename(out_dir, old)
+        else:
+            out_dir.rmdir()
+    try:
+        os.rename(tmp, out_dir)
+    except OSError:
+        if old is not None:
+            os.rename(old, out_dir)
+        raise
+    if old is not None:
+        shutil.rmtree(old, ignore_errors=True)
+
+
+# -- compile ---------------------------------------------------------------------------------------
+
+
+@dataclass
+class BuildReport:
+    """What compile_bundle did; `lines()` is what `dcts compile` prints."""
+
+    directory: Path
+    manifest: dict
+    built: bool
+    test_output: str = ""
+    firmware: dict | None = None
+    notes: list[str] = field(default_factory=list)
+
+    def lines(self) -> list[str]:
+        m = self.manifest
+        out = [
+            f"wrote {self.directory} — {m['name']}: {m['formulation']}, NQ={m['nq']} NREF={m['nref']} "
+            f"NX={m['nx']} NA={m['na']} NLEVELS={m['nlevels']}",
+        ]
+        if self.built:
+            host = m.get("host", {})
+            out.append(f"  host library   {m['library']} ({host.get('text_bytes', '?')} bytes .text), "
+                       f"workspace {m['workspace_bytes_host']} bytes, DAQP init heap {host.get('init_heap_bytes', '?')} bytes")
+            out.append(f"  golden test    {host.get('test_summary', '')}")
+        else:
+            out.append("  sources only (--no-build): run `make && make check` in the directory")
+        if self.firmware:
+            fw = self.firmware
+            out.append(f"  cortex-m7      flash {fw['flash_bytes']} bytes (text+data), RAM {fw['ram_bytes']} bytes "
+                       f"(data+bss, workspace {fw['workspace_bytes']} included) + DAQP heap {fw.get('heap_bytes', '?')} bytes")
+            if "stack_bytes" in fw:
+                out.append(f"                 largest stack frames: {fw['stack_bytes']}")
+            if fw.get("qemu"):
+                out.append(f"  qemu           {fw['qemu']}")
+        out.extend(f"  note: {n}" for n in self.notes)
+        return out
+
+
+def _load(spec: Spec | str | Path) -> tuple[Spec, bytes | None]:
+    if isinstance(spec, Spec):
+        file = Path(spec.source.file)
+        return spec, file.read_bytes() if file.is_file() else None
+    path = Path(spec)
+    return load_spec(path), path.read_bytes() if path.is_file() else None
+
+
+def make_controller(spec: Spec, formulation: str | None = None) -> Controller:
+    """Validate and compile the spec for the Python runtime (SpecError on a broken spec)."""
+    from ..validate import validate_spec
+
+    report = validate_spec(spec)
+    try:
+        return Controller(spec, report.robot, formulation)
+    except ValueError as exc:
+        raise CodegenError(str(exc)) from None
+
+
+def _text_size(path: Path) -> int:
+    output = run(["size", "-A", str(path)], path.parent, "size")
+    for line in output.splitlines():
+        parts = line.split()
+        if parts and parts[0] == ".text":
+            return int(parts[1])
+    return 0
+
+
+def build_host(directory: Path, manifest: dict, cc: str | None = None) -> dict:
+    """Build the host library and the test with `make`, run the test and the heap check."""
+    variables = {"CC": cc} if cc else {}
+    make(directory, ["all"], "host build", variables)
+    test = make(directory, ["check"], "golden-vector test", variables)
+    heap = make(directory, ["heapcheck"], "heap check", variables)
+    summary = next((line for line in test.splitlines() if "golden vectors" in line), "").strip()
+    heap_line = next((line for line in heap.splitlines() if line.startswith("heap:")), "")
+    found = re.search(r"init (\d+) calls (\d+) bytes; steps (\d+) calls", heap_line)
+    lib = directory / manifest["library"]
+    return {
+        "compiler": cc or os.environ.get("CC", "cc"),
+        "test_summary": summary,
+        "init_heap_calls": int(found.group(1)) if found else None,
+        "init_heap_bytes": int(found.group(2)) if found else None,
+        "step_heap_calls": int(found.group(3)) if found else None,
+        "text_bytes": _text_size(lib),
+        "library_bytes": lib.stat().st_size,
+    }
+
+
+def daqp_source_version(csrc: Path) -> str:
+    """"0.5" for the unprefixed API (as in the casadi wheel), ">=0.6" for the DAQP_-prefixed one."""
+    constants = csrc / "include" / "constants.h"
+    try:
+        return ">=0.6" if "DAQP_UPDATE_Rinv" in constants.read_text() else "0.5"
+    except OSError:
+        raise CodegenError(f"{csrc} is not DAQP's csrc folder (no include/constants.h)") from None
+
+
+def build_firmware(directory: Path, manifest: dict, daqp_src: Path | None, qemu: bool = True) -> dict:
+    """Cross-compile for Cortex-M7 (double FPU), report flash/RAM, run the golden test on qemu."""
+    if shutil.which("arm-none-eabi-gcc") is None:
+        raise CodegenError("arm-none-eabi-gcc not found: install gcc-arm-none-eabi and libnewlib-arm-none-eabi")
+    variables = {}
+    source = None
+    if manifest["nx"]:
+        source = Path(daqp_src) if daqp_src else daqp_sources()
+        variables["DAQP_SRC"] = str(source)
+    make(directory, ["firmware"], "firmware build", variables, timeout=1200)
+    name = manifest["name"]
+    sections = _arm_sections(directory / "firmware" / f"{name}_fw.size")
+    text, data, bss = sections.get("text", 0), sections.get("data", 0), sections.get("bss", 0)
+    result = {
+        "cpu": "cortex-m7 fpv5-d16 hard-float",
+        "daqp_source": f"{source} (API {daqp_source_version(source)})" if source else None,
+        "flash_bytes": text + data,
+        "ram_bytes": data + bss,
+        "text_bytes": text,
+        "data_bytes": data,
+        "bss_bytes": bss,
+        "workspace_bytes": _arm_symbol_size(directory / "firmware" / f"{name}_fw.elf", "ws"),
+        "stack_bytes": _stack_usage(directory / "build" / "arm", name),
+    }
+    if qemu and shutil.which("qemu-system-arm"):
+        output = make(directory, ["qemu-check"], "golden-vector test on qemu (cortex-m7)", variables, timeout=1200)
+        summary = next((line.strip() for line in output.splitlines() if "golden vectors" in line), "")
+        heap = re.search(r"heap: init (\d+) calls (\d+) bytes; steps (\d+) calls", output)
+        if heap:
+            result["heap_bytes"] = int(heap.group(2))
+            result["step_heap_calls"] = int(heap.group(3))
+        result["qemu"] = f"{summary} — PASS" if "PASS" in output else summary
+    return result
+
+
+def _arm_sections(size_file: Path) -> dict[str, int]:
+    """Group `size -A` sections of the image into text (flash only), data and bss."""
+    out = {"text": 0, "data": 0, "bss": 0}
+    for line in size_file.read_text().splitlines():
+        parts = line.split()
+        if len(parts) < 3 or not parts[1].isdigit():
+            continue
+        section, size = parts[0], int(parts[1])
+        if section in (".text", ".ARM.extab", ".ARM.exidx", ".rodata"):
+            out["text"] += size
+        elif section == ".data":
+            out["data"] += size
+        elif section == ".bss":
+            out["bss"] += size
+    return out
+
+
+def _arm_symbol_size(elf: Path, symbol: str) -> int | None:
+    output = run(["arm-none-eabi-nm", "-S", str(elf)], elf.parent, "nm")
+    for line in output.splitlines():
+        parts = line.split()
+        if len(parts) == 4 and parts[3] == symbol:
+            return int(parts[1], 16)
+    return None
+
+
+def _stack_usage(build: Path, name: str) -> dict[str, int]:
+    """The largest stack frames (-fstack-usage) of the controller's own functions."""
+    frames: dict[str, int] = {}
+    for su in (build / f"{name}.su", build / f"{name}_casadi.su"):
+        if not su.is_file():
+            continue
+        for line in su.read_text().splitlines():
+            parts = line.split("\t")
+            if len(parts) >= 2 and parts[1].isdigit():
+                frames[parts[0].split(":")[-1]] = int(parts[1])
+    return dict(sorted(frames.items(), key=lambda kv: -kv[1])[:4])
+
+
+def _note_heap(header: Path, heap_bytes: int | None) -> None:
+    """Write the measured DAQP heap into the header's memory note."""
+    if heap_bytes is None:
+        return
+    text = header.read_text()
+    measured = f"{heap_bytes} bytes with the host build's DAQP on x86-64 (`make heapcheck`)"
+    header.write_text(text.replace(HEAP_SENTINEL, measured))
+
+
+def compile_bundle(
+    spec: Spec | str | Path,
+    out_dir: str | Path,
+    formulation: str | None = None,
+    build: bool = True,
+    target: str = "host",
+    cc: str | None = None,
+    daqp_src: str | Path | None = None,
+    warm_start: bool = False,
+    golden_count: int | None = None,
+    qemu: bool = True,
+) -> BuildReport:
+    """Generate (and build) the C bundle of a spec into out_dir, atomically.
+
+    Raises SpecError for a broken spec and CodegenError for everything else; in both cases
+    nothing is left at out_dir (an older bundle there stays untouched)."""
+    if target not in TARGETS:
+        raise CodegenError(f"unknown target {target!r}; choose one of {', '.join(TARGETS)}")
+    out_dir = Path(out_dir).expanduser().absolute()
+    if out_dir.name in ("", ".", ".."):
+        raise CodegenError(f"invalid output directory {out_dir}")
+    _check_output(out_dir)
+    spec_obj, spec_bytes = _load(spec)
+    controller = make_controller(spec_obj, formulation)
+
+    created = _make_parents(out_dir.parent)
+    try:
+        tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.tmp-", dir=out_dir.parent))
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o777 & ~umask)  # mkdtemp makes it private; the bundle is an ordinary folder
+    except OSError as exc:
+        _remove_created(created)
+        raise CodegenError(f"cannot write into {out_dir.parent}: {exc.strerror}") from None
+    try:
+        daqp_include, daqp_library = casadi_daqp() if controller.nx else ("", "")
+        kwargs = {} if golden_count is None else {"golden_count": golden_count}
+        sources = generate_sources(controller, tmp, spec_bytes=spec_bytes, warm_start=warm_start,
+                                   daqp_include=str(daqp_include), daqp_library=str(daqp_library), **kwargs)
+        manifest = sources.manifest
+        report = BuildReport(out_dir, manifest, build)
+        if build:
+            manifest["host"] = build_host(tmp, manifest, cc)
+            manifest["built"] = True
+            _note_heap(tmp / f"{manifest['name']}.h", manifest["host"].get("init_heap_bytes"))
+        if target == "cortex-m7":
+            source = Path(daqp_src) if daqp_src else None
+            report.firmware = manifest["cortex_m7"] = build_firmware(tmp, manifest, source, qemu=qemu)
+        (tmp / "manifest.json").write_text(json.dumps(manifest, indent=2) + "\n")
+        _install(tmp, out_dir)
+    except BaseException as exc:
+        shutil.rmtree(tmp, ignore_errors=True)
+        _remove_created(created)
+        if isinstance(exc, (CodegenError, KeyboardInterrupt)):
+            raise
+        if isinstance(exc, OSError):
+            raise CodegenError(f"writing the bundle failed: {exc}") from None
+        raise
+    return report

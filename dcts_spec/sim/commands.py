@@ -1,0 +1,176 @@
+"""What `dcts simulate` and `dcts compare` do once their arguments are parsed.
+
+Both return an exit code: problems the user can fix (a broken spec, no scenario, a runtime,
+viewer or encoder missing here) are one message and exit 1, never a traceback. Output
+directories are written all or nothing.
+"""
+
+from __future__ import annotations
+
+import tempfile
+from collections.abc import Callable
+from contextlib import ExitStack
+from dataclasses import dataclass
+from pathlib import Path
+
+import typer
+
+from ..analysis.compare import markdown_table, write_comparison
+from ..analysis.outputs import atomic_directory, write_run
+from ..analysis.run import RunResult, analyze
+from ..formulations import FORMULATIONS
+from ..spec import Spec, SpecError, load_spec
+from .progress import ProgressBar
+from .runner import Hook, Simulation, prepare_simulation
+from .runtime import RUNTIMES, RuntimeUnavailable
+from .video import VideoRecorder, VideoUnavailable
+from .viewer import LiveViewer, ViewerUnavailable
+
+RESULTS_DIR = Path("runs")
+
+
+class CommandError(Exception):
+    """A problem to tell the user in one message."""
+
+
+@dataclass(frozen=True)
+class RunOptions:
+    runtime: str = "c"
+    duration: float | None = None
+    quiet: bool = False
+
+
+def simulate_command(file: Path, out: Path | None, options: RunOptions, formulation: str | None = None,
+                     plots: bool = True, viewer: bool = False, video: Path | None = None) -> int:
+    """`dcts simulate`: one run, its log, summary and plots in `out`."""
+    return _guarded(lambda: _simulate(file, out, options, formulation, plots, viewer, video))
+
+
+def compare_command(file: Path, out: Path | None, options: RunOptions, formulations: list[str]) -> int:
+    """`dcts compare`: the same scenario with each formulation, a table and overlay plots in `out`."""
+    return _guarded(lambda: _compare(file, out, options, formulations))
+
+
+def _guarded(command: Callable[[], None]) -> int:
+    try:
+        command()
+    except SpecError as error:
+        typer.echo(str(error), err=True)
+        return 1
+    except (CommandError, RuntimeUnavailable, VideoUnavailable) as error:
+        typer.echo(f"error: {error}", err=True)
+        return 1
+    return 0
+
+
+def _simulate(file: Path, out: Path | None, options: RunOptions, formulation: str | None,
+              plots: bool, viewer: bool, video: Path | None) -> None:
+    spec = _load(file, options, [formulation] if formulation else [])
+    out = _output_directory(out, RESULTS_DIR / spec.name)
+    with ExitStack() as stack:
+        sim = _prepare(spec, options, formulation, stack)
+        hooks = []
+        if viewer:
+            try:
+                live = LiveViewer(sim)
+            except ViewerUnavailable as error:
+                typer.echo(f"warning: {error}; running without the viewer", err=True)
+            else:
+                stack.callback(live.close)
+                hooks.append(live.hook())
+        recorder = VideoRecorder(sim, video) if video is not None else None
+        try:
+            run = _run(sim, options, hooks + ([recorder.hook()] if recorder else []))
+        except BaseException:
+            if recorder:
+                recorder.close(keep=False)
+            raise
+        if recorder:
+            recorder.close()
+        with atomic_directory(out) as staging:
+            write_run(run, staging, plots=plots)
+    if not options.quiet:
+        typer.echo(describe(run))
+        if video is not None:
+            typer.echo(f"wrote {video}")
+        typer.echo(f"wrote {out}/ (log.npz, summary.json{', plots' if plots else ''})")
+
+
+def _compare(file: Path, out: Path | None, options: RunOptions, formulations: list[str]) -> None:
+    if not formulations:
+        raise CommandError("--formulations needs at least one formulation")
+    spec = _load(file, options, formulations)
+    out = _output_directory(out, RESULTS_DIR / f"{spec.name}-compare")
+    runs = []
+    with ExitStack() as stack:
+        for formulation in formulations:
+            sim = _prepare(spec, options, formulation, stack)
+            runs.append(_run(sim, options, []))
+            if not options.quiet:
+                typer.echo(describe(runs[-1]))
+    with atomic_directory(out) as staging:
+        write_comparison(runs, staging, f"{spec.name}: {', '.join(formulations)} ({options.runtime} runtime)")
+    if not options.quiet:
+        typer.echo(markdown_table(runs), nl=False)
+        typer.echo(f"wrote {out}/ (comparison.md, comparison.json, overlay plots, one folder per formulation)")
+
+
+def _load(file: Path, options: RunOptions, formulations: list[str]) -> Spec:
+    """The spec, after checking the options that do not need it."""
+    if options.runtime not in RUNTIMES:
+        raise CommandError(f"unknown runtime {options.runtime!r}; choose one of {', '.join(RUNTIMES)}")
+    unknown = [f for f in formulations if f not in FORMULATIONS]
+    if unknown:
+        raise CommandError(f"unknown formulation {unknown[0]!r}; choose from {', '.join(FORMULATIONS)}")
+    if options.duration is not None and options.duration <= 0:
+        raise CommandError(f"--duration must be positive, got {options.duration:g}")
+    return load_spec(file)
+
+
+def _output_directory(out: Path | None, default: Path) -> Path:
+    """The output directory, checked before a run rather than after it."""
+    out = out or default
+    if out.exists() and not out.is_dir():
+        raise CommandError(f"--out {out} exists and is not a directory")
+    return out
+
+
+def _prepare(spec: Spec, options: RunOptions, formulation: str | None, stack: ExitStack) -> Simulation:
+    # The C bundle lives as long as the run that loads it.
+    work_dir = stack.enter_context(tempfile.TemporaryDirectory(prefix="dcts-runtime-"))
+    return prepare_simulation(spec, options.runtime, formulation, options.duration, work_dir)
+
+
+def _run(sim: Simulation, options: RunOptions, hooks: list[Hook]) -> RunResult:
+    label = f"{sim.spec.name}: {sim.formulation} ({sim.runtime_kind})"
+    progress = ProgressBar(sim.scenario.steps, sim.scenario.period, label, enabled=not options.quiet)
+    try:
+        log = sim.run([*hooks, progress.hook()])
+    finally:
+        progress.close()
+    return analyze(sim, log)
+
+
+def describe(run: RunResult) -> str:
+    """A few lines about a run for the terminal."""
+    s = run.summary
+    speed = f" ({s['realtime_factor']:.3g}× real time)" if s["realtime_factor"] else ""
+    lines = [f"{s['spec']}: {s['formulation']}, {s['runtime']} runtime — {s['duration']:.3g} s simulated in "
+             f"{s['wall_time']:.3g} s{speed}"]
+    if not s["completed"]:
+        lines.append(f"  UNSTABLE   MuJoCo stopped the run at t = {s['diverged_at']:.4g} s")
+    lines.append(f"  limits     worst excess: position {s['max_joint_position_violation']:.3g} rad, velocity "
+                 f"{s['max_joint_velocity_violation']:.3g} rad/s ({100 * s['max_joint_velocity_violation_ratio']:.3g}% "
+                 f"of its limit), torque {s['max_torque_violation']:.3g} Nm, "
+                 f"Cartesian {s['max_cartesian_violation']:.3g} m")
+    lines.append(f"  solver     {s['solver_failures']} failures, {s['limits_relaxed']} steps with relaxed limits, "
+                 f"min scaling {s['min_scaling']:.3g}")
+    errors = ", ".join(f"{k} {v:.3g}" for k, v in s["task_rms_error"].items())
+    lines.append(f"  tasks      RMS error: {errors}; priority-1 mean acceleration error "
+                 f"{s['primary_mean_acceleration_error']:.3g}")
+    lines.append(f"  energy     ∫acceleration energy {s['acceleration_energy_integral']:.4g}, kinetic peaks: "
+                 f"task {s['task_space_kinetic_energy_peak']:.3g} J, "
+                 f"null space {s['null_space_kinetic_energy_peak']:.3g} J")
+    if s["waypoints_total"]:
+        lines.append(f"  waypoints  {s['waypoints_reached']}/{s['waypoints_total']} reached")
+    return "\n".join(lines)

@@ -1,0 +1,150 @@
+"""The closed loop: the compiled controller drives the MuJoCo robot through a scenario."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import mujoco
+import numpy as np
+
+from ..robot.model import Robot
+from ..spec import Spec
+from ..tasks import make_task
+from ..validate import validate_spec
+from .disturbances import Disturbances
+from .log import SimulationLog
+from .mismatch import scaled_robot
+from .mujoco_model import build_mujoco_model
+from .references import WaypointFollower, initial_references
+from .runtime import Runtime, make_runtime
+from .scenario import Scenario, resolve_scenario
+from .sensing import TorqueSensor
+
+
+@dataclass(frozen=True)
+class Hook:
+    """Called as `call(k)` after every `every` control steps (k: the step just simulated)."""
+
+    every: int
+    call: Callable[[int], None]
+
+
+class Simulation:
+    """One spec's robot in MuJoCo with a runtime in the loop; `run` simulates the scenario."""
+
+    def __init__(self, spec: Spec, robot: Robot, scenario: Scenario, runtime: Runtime,
+                 controller_robot: Robot | None = None, runtime_kind: str = "python",
+                 formulation: str | None = None):
+        self.spec = spec
+        self.robot = robot  # the simulated robot (without payloads)
+        self.controller_robot = controller_robot or robot
+        self.scenario = scenario
+        self.runtime = runtime
+        self.runtime_kind = runtime_kind
+        self.formulation = formulation or spec.controller.formulation
+        self.mj_model = build_mujoco_model(robot.model, timestep=scenario.timestep, integrator=scenario.integrator,
+                                           payloads=scenario.payloads, scenery=True)
+        self.mj_data = mujoco.MjData(self.mj_model)
+        tasks = [make_task(t, robot) for t in spec.tasks]
+        self.initial_ref = initial_references(tasks, runtime.ref_layout, robot, scenario.q0)
+        self.waypoints: WaypointFollower | None = None
+        if scenario.waypoints is not None:
+            task = next(t for t in tasks if t.name == scenario.waypoints.task)
+            self.waypoints = WaypointFollower(scenario.waypoints, task, runtime.ref_layout, robot)
+
+    def reset(self) -> None:
+        """MuJoCo at the scenario's initial state."""
+        mujoco.mj_resetData(self.mj_model, self.mj_data)
+        self.mj_data.qpos[:] = self.scenario.q0
+        self.mj_data.qvel[:] = self.scenario.dq0
+        mujoco.mj_forward(self.mj_model, self.mj_data)
+
+    def run(self, hooks: Sequence[Hook] = ()) -> SimulationLog:
+        """Simulate the whole scenario, or until MuJoCo rejects the state or the torque."""
+        sc, m, d = self.scenario, self.mj_model, self.mj_data
+        steps, substeps, period = sc.steps, sc.substeps, sc.period
+        n = self.robot.nv
+        levels = len(self.runtime.priorities)
+        log = SimulationLog.allocate(steps, n, self.initial_ref.size, levels, period)
+        disturbances = Disturbances(sc, self.robot.model, m)
+        sensor = TorqueSensor(sc.sensing, self.controller_robot.model, steps)
+        follower = self.waypoints
+        ref = self.initial_ref.copy()
+        if follower is not None:
+            follower.index = 0
+            follower.reached_at[:] = np.nan
+            follower.write(ref)
+        self.reset()
+        # Locals: attribute look-ups cost as much as the small numpy operations here.
+        q, dq, ddq, tau, ddq_cmd = log.q, log.dq, log.ddq, log.tau, log.ddq_commanded
+        tau_true, tau_meas, refs, times = log.tau_ext_true, log.tau_ext_measured, log.ref, log.time
+        scaling, status = log.scaling, log.status
+        step, mj_step, ctrl = self.runtime.step, mujoco.mj_step, d.ctrl
+        # MuJoCo resets the state on a huge acceleration and zeroes a huge or NaN control: either
+        # makes the rest of the run meaningless.
+        bad_qacc, bad_ctrl = d.warning[mujoco.mjtWarning.mjWARN_BADQACC], d.warning[mujoco.mjtWarning.mjWARN_BADCTRL]
+        warn_handler = mujoco.get_mju_user_warning()
+        mujoco.set_mju_user_warning(lambda message: None)  # divergence is reported in the log instead
+        start = time.perf_counter()
+        hook_time = 0.0  # viewer, video and progress display: not part of the loop's speed
+        done = steps
+        try:
+            for k in range(steps):
+                q[k] = d.qpos
+                dq[k] = d.qvel
+                if k:
+                    np.subtract(dq[k], dq[k - 1], out=ddq[k - 1])
+                    ddq[k - 1] /= period
+                sensor.measure(k, q[k - 1], dq[k - 1], ddq[k - 1], tau[k - 1], tau_meas[k])
+                if follower is not None:
+                    follower.update(times[k], q[k], ref)
+                refs[k] = ref
+                result = step(q[k], dq[k], tau_meas[k], ref)
+                ctrl[:] = tau[k] = result.tau
+                ddq_cmd[k] = result.ddq
+                scaling[k] = result.scaling
+                status[k] = result.status
+                for s in range(substeps):
+                    j = k * substeps + s
+                    disturbances.apply(m, d, j)
+                    if s == 0:
+                        disturbances.generalized(m, d, j, tau_true[k])
+                    mj_step(m, d)
+                if bad_qacc.number or bad_ctrl.number:
+                    log.diverged_at = float(times[k])
+                    done = k  # step k has no valid successor
+                    break
+                for hook in hooks:
+                    if (k + 1) % hook.every == 0:
+                        hook_start = time.perf_counter()
+                        hook.call(k)
+                        hook_time += time.perf_counter() - hook_start
+            else:
+                ddq[-1] = (d.qvel - dq[-1]) / period
+        finally:
+            mujoco.set_mju_user_warning(warn_handler)
+        log.wall_time = time.perf_counter() - start - hook_time
+        if done < steps:
+            log.truncate(done)
+        if follower is not None:
+            log.waypoint_times = follower.reached_at.copy()
+        return log
+
+
+def prepare_simulation(spec: Spec, runtime: str = "python", formulation: str | None = None,
+                       duration: float | None = None, work_dir: str | Path | None = None) -> Simulation:
+    """Validate the spec, resolve its scenario, build the runtime and the MuJoCo model.
+
+    Raises SpecError for a broken spec or a missing scenario, RuntimeUnavailable when the
+    runtime cannot be built here.
+    """
+    report = validate_spec(spec)
+    scenario = resolve_scenario(spec, report.robot)
+    if duration is not None:
+        scenario = scenario.with_duration(duration)
+    controller_robot = scaled_robot(report.robot, scenario.mass_scale)
+    rt = make_runtime(spec, runtime, formulation, robot=controller_robot, work_dir=work_dir)
+    return Simulation(spec, report.robot, scenario, rt, controller_robot, runtime, formulation)

@@ -1,0 +1,182 @@
+"""Metrics of a run: their definitions on hand-made logs, the energy split, tables, atomic outputs."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from dcts_spec.analysis.compare import markdown_table, table_rows
+from dcts_spec.analysis.metrics import SUMMARY_KEYS, json_ready, summarize
+from dcts_spec.analysis.outputs import atomic_directory
+from dcts_spec.analysis.run import RunResult
+from dcts_spec.analysis.series import TimeSeries, _kinetic_energies, evaluate
+from dcts_spec.sim.log import SimulationLog
+from dcts_spec.spec import load_spec_text
+from dcts_spec.validate import validate_spec
+
+SPEC = """
+version: 1
+name: metrics
+robot: {model: iiwa14}
+limits:
+  joint_velocity: {max: 1.0}
+  joint_torque: {max: 50}
+  cartesian:
+    - {frame: tool, axis: z, min: 0.3}
+tasks:
+  - {name: reach, type: position, frame: tool, priority: 1, gains: {kp: 100, kd: 20}, reference: {input: true}}
+  - {name: tilt, type: orientation, frame: tool, axes: [rx, ry], priority: 2, gains: {kp: 50, kd: 10}, reference: {rpy: [3.1, 0, 0]}}
+  - {name: posture, type: joint, priority: 3, gains: {kp: 10, kd: 5}, reference: {q: [0, 0.5, 0, -1, 0, 1, 0]}}
+scenario: {duration: 0.01}
+"""
+
+
+@pytest.fixture(scope="module")
+def case():
+    spec = load_spec_text(SPEC)
+    robot = validate_spec(spec).robot
+    rng = np.random.default_rng(4)
+    log = SimulationLog.allocate(40, 7, 3, 3, 0.002)
+    lo, hi = robot.limits.q_min, robot.limits.q_max
+    log.q[:] = rng.uniform(lo + 0.2, hi - 0.2, (40, 7))
+    log.dq[:] = rng.uniform(-0.5, 0.5, (40, 7))
+    log.ddq[:] = rng.uniform(-3, 3, (40, 7))
+    log.tau[:] = rng.uniform(-40, 40, (40, 7))
+    log.ref[:] = rng.uniform(0.2, 0.6, (40, 3))
+    log.scaling[:] = 1.0
+    return spec, robot, log, evaluate(spec, robot, log)
+
+
+def _numeric(robot, q, dq, frame="tool"):
+    model = robot.model
+    data = model.createData()
+    M = pin.crba(model, data, q)
+    M = np.triu(M) + np.triu(M, 1).T
+    g = pin.computeGeneralizedGravity(model, data, q)
+    fid = model.getFrameId(frame)
+    J = pin.computeFrameJacobian(model, data, q, fid, pin.LOCAL_WORLD_ALIGNED)
+    pin.forwardKinematics(model, data, q, dq, np.zeros(model.nv))
+    bias = pin.getFrameClassicalAcceleration(model, data, fid, pin.LOCAL_WORLD_ALIGNED).vector
+    pin.updateFramePlacements(model, data)
+    return M, g, J, bias, data.oMf[fid]
+
+
+def test_series_match_pinocchio(case) -> None:
+    spec, robot, log, series = case
+    for k in (0, 17, 39):
+        q, dq, a, tau = log.q[k], log.dq[k], log.ddq[k], log.tau[k]
+        M, g, J, bias, placement = _numeric(robot, q, dq)
+        np.testing.assert_allclose(series.frame_positions["tool"][k], placement.translation, atol=1e-12)
+        np.testing.assert_allclose(series.task_errors["reach"][k], log.ref[k] - placement.translation, atol=1e-12)
+        np.testing.assert_allclose(series.task_errors["posture"][k], np.array([0, 0.5, 0, -1, 0, 1, 0]) - q, atol=1e-12)
+        # J a + J̇q̇ − ẍ_d of the first level, ẍ_d = kp Δx − kd ẋ
+        target = 100 * (log.ref[k] - placement.translation) - 20 * J[:3] @ dq
+        np.testing.assert_allclose(series.acceleration_errors[1][k], J[:3] @ a + bias[:3] - target, atol=1e-9)
+        assert series.kinetic_energy[k] == pytest.approx(0.5 * dq @ M @ dq, rel=1e-12)
+        assert series.acceleration_energy[k] == pytest.approx(0.5 * (tau - g) @ np.linalg.solve(M, tau - g), rel=1e-10)
+
+
+def test_kinetic_energy_split_is_m_orthogonal() -> None:
+    rng = np.random.default_rng(0)
+    n, m, samples = 7, 5, 6
+    A = rng.normal(size=(samples, n, n))
+    M = A @ A.transpose(0, 2, 1) + n * np.eye(n)
+    J = rng.normal(size=(samples, m, n))
+    J[0, 4] = J[0, 3]  # a rank-deficient stack: the pseudo-inverse handles it
+    dq = rng.normal(size=(samples, n))
+    total, task = _kinetic_energies(M, J, dq)
+    for k in range(samples):
+        Minv = np.linalg.inv(M[k])
+        Lambda = np.linalg.pinv(J[k] @ Minv @ J[k].T)
+        # the task-consistent part of q̇ and its M-orthogonal complement
+        dq_task = Minv @ J[k].T @ Lambda @ J[k] @ dq[k]
+        dq_null = dq[k] - dq_task
+        assert dq_task @ M[k] @ dq_null == pytest.approx(0.0, abs=1e-9)
+        assert task[k] == pytest.approx(0.5 * dq_task @ M[k] @ dq_task, rel=1e-9)
+        assert total[k] - task[k] == pytest.approx(0.5 * dq_null @ M[k] @ dq_null, rel=1e-8, abs=1e-12)
+    # A full-rank square stack leaves no null space.
+    square = rng.normal(size=(1, n, n))
+    total, task = _kinetic_energies(M[:1], square, dq[:1])
+    assert task[0] == pytest.approx(total[0], rel=1e-9)
+
+
+def test_summary_definitions(case) -> None:
+    spec, robot, log, series = case
+    log = SimulationLog(**{**log.__dict__})
+    log.q = log.q.copy()
+    log.dq = np.zeros_like(log.dq)
+    log.tau = np.zeros_like(log.tau)
+    log.scaling = np.ones_like(log.scaling)
+    log.status = np.zeros_like(log.status)
+    log.q[3, 1] = robot.limits.q_max[1] + 0.1
+    log.q[5, 2] = robot.limits.q_min[2] - 0.25
+    log.dq[7, 4] = -1.5  # v_max = 1
+    log.tau[9, 0] = 52.0  # τ_max = 50
+    log.scaling[11] = [1.0, 0.4, 0.0]
+    log.status[[12, 13]] = [-2, 1]
+    log.wall_time = 0.04
+    series = evaluate(spec, robot, log)
+    summary = summarize(log, series, robot, [1, 2, 3])
+    assert summary["max_joint_position_violation"] == pytest.approx(0.25)
+    assert summary["max_joint_velocity_violation"] == pytest.approx(0.5)
+    assert summary["max_joint_velocity_violation_ratio"] == pytest.approx(0.5)
+    assert summary["max_torque_violation"] == pytest.approx(2.0)
+    assert summary["solver_failures"] == 1 and summary["limits_relaxed"] == 1
+    assert summary["min_scaling"] == 0.0
+    assert summary["realtime_factor"] == pytest.approx(0.08 / 0.04)
+    errors = series.task_errors["reach"]
+    assert summary["task_rms_error"]["reach"] == pytest.approx(np.sqrt(np.mean(np.sum(errors**2, axis=1))))
+    assert summary["primary_mean_acceleration_error"] == pytest.approx(
+        np.mean(np.linalg.norm(series.acceleration_errors[1], axis=1)))
+    assert summary["acceleration_energy_integral"] == pytest.approx(np.sum(series.acceleration_energy) * 0.002)
+    z = series.frame_positions["tool"][:, 2]
+    assert summary["max_cartesian_violation"] == pytest.approx(max(0.0, 0.3 - z.min()))
+    assert set(SUMMARY_KEYS) <= set(summary)
+    json.dumps(json_ready(summary))
+
+
+def test_json_ready_and_tables(case) -> None:
+    assert json_ready({"a": float("nan"), "b": [np.float64(1.5), float("inf")], 3: np.int64(2)}) == \
+        {"a": None, "b": [1.5, None], "3": 2}
+    spec, robot, log, series = case
+    runs = [RunResult(label, robot, log, series, {"min_scaling": value, "task_rms_error": {"reach": 0.5}},
+                      [1, 2, 3], {}) for label, value in (("dcts", 0.25), ("osc", None))]
+    rows = dict(table_rows(runs))
+    assert rows["min_scaling"] == [0.25, None] and rows["task_rms_error[reach]"] == [0.5, 0.5]
+    table = markdown_table(runs)
+    assert table.splitlines()[0] == "| metric | dcts | osc |"
+    assert "| min_scaling | 0.25 | – |" in table
+
+
+def test_atomic_directory_replaces_on_success_and_keeps_the_old_on_failure(tmp_path: Path) -> None:
+    out = tmp_path / "out"
+    with atomic_directory(out) as staging:
+        (staging / "a.txt").write_text("first")
+        assert not out.exists()
+    assert (out / "a.txt").read_text() == "first"
+    with pytest.raises(RuntimeError):
+        with atomic_directory(out) as staging:
+            (staging / "a.txt").write_text("second")
+            raise RuntimeError("boom")
+    assert (out / "a.txt").read_text() == "first"
+    with atomic_directory(out) as staging:
+        (staging / "b.txt").write_text("third")
+    assert [p.name for p in out.iterdir()] == ["b.txt"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]
+    (tmp_path / "file").write_text("")
+    with pytest.raises(FileExistsError):
+        with atomic_directory(tmp_path / "file"):
+            pass
+
+
+def test_empty_log_has_a_summary(case) -> None:
+    spec, robot, _, _ = case
+    log = SimulationLog.allocate(0, 7, 3, 3, 0.001)
+    series = evaluate(spec, robot, log)
+    assert isinstance(series, TimeSeries)
+    summary = summarize(log, series, robot, [1, 2, 3])
+    assert summary["steps"] == 0 and summary["min_scaling"] == 1.0

@@ -1,0 +1,399 @@
+"""Closed-loop simulation: disturbances and τ_ext sensing with real physics, scenarios, the CLI."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import mujoco
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from dcts_spec.analysis.run import analyze
+from dcts_spec.controller import StepResult
+from dcts_spec.sim.commands import RunOptions, simulate_command
+from dcts_spec.sim.mismatch import scaled_robot
+from dcts_spec.sim.mujoco_model import mass_matrix
+from dcts_spec.sim.runner import Simulation, prepare_simulation
+from dcts_spec.sim.runtime import RuntimeUnavailable, make_runtime
+from dcts_spec.sim.scenario import TorqueProfile
+from dcts_spec.spec import SpecError, load_spec_text
+
+ROOT = Path(__file__).resolve().parents[1]
+HOME = "[0, 0.6, 0, -1.2, 0, 0.8, 0]"
+
+
+def spec_text(scenario: str, tasks: str = "", limits: str = "joint_torque: {max: 300, allow_outside_urdf: true}") -> str:
+    """An iiwa14 holding its tool at a point over a damped null space; `scenario` is indented YAML."""
+    tasks = tasks or """
+  - {name: hold, type: position, frame: tool, priority: 1, gains: {kp: 100, kd: 20}, reference: {position: [0.69, 0.0, 0.51]}}
+  - {name: damping, type: joint, priority: 2, gains: {kp: 0, kd: 5}}"""
+    return f"""
+version: 1
+name: sim_case
+robot: {{model: iiwa14}}
+limits:
+  {limits}
+tasks:{tasks}
+scenario:
+  initial_q: {HOME}
+{scenario}"""
+
+
+def simulate(text: str, formulation: str | None = None, runtime=None) -> tuple[Simulation, object]:
+    sim = prepare_simulation(load_spec_text(text), "python", formulation)
+    if runtime is not None:
+        sim = Simulation(sim.spec, sim.robot, sim.scenario, runtime)
+    return sim, sim.run()
+
+
+def point_jacobian(model: pin.Model, q: np.ndarray, frame: str, point: np.ndarray) -> np.ndarray:
+    """(6, n): rows [velocity of `point` (in the frame); angular velocity], world axes."""
+    data = model.createData()
+    fid = model.getFrameId(frame)
+    J = pin.computeFrameJacobian(model, data, q, fid, pin.LOCAL_WORLD_ALIGNED)
+    lever = data.oMf[fid].rotation @ point
+    return np.vstack([J[:3] - pin.skew(lever) @ J[3:], J[3:]])
+
+
+PUSH = """
+  duration: 0.2
+  disturbances:
+    - {type: force, body: tool, point: [0.02, -0.01, 0.05], force: [10, -5, 20], torque: [0.5, 1.0, -0.3], start: 0.05, duration: 0.1}
+"""
+
+
+def test_push_at_a_point_is_measured_as_jacobian_transpose_wrench() -> None:
+    sim, log = simulate(spec_text(PUSH))
+    wrench = np.array([10, -5, 20, 0.5, 1.0, -0.3])
+    window = range(51, 150)
+    for k in window:
+        expected = point_jacobian(sim.robot.model, log.q[k], "tool", np.array([0.02, -0.01, 0.05])).T @ wrench
+        np.testing.assert_allclose(log.tau_ext_true[k], expected, atol=1e-10)
+        # Ideal sensing sees the previous step's torque, reconstructed from the motion alone:
+        # this checks the moment (p − c) × f MuJoCo needs for a force away from the CoM.
+        np.testing.assert_allclose(log.tau_ext_measured[k + 1], expected, atol=1e-9)
+    outside = np.r_[0:50, 152:log.steps]
+    assert np.abs(log.tau_ext_true[outside]).max() == 0.0
+    assert np.abs(log.tau_ext_measured[outside]).max() < 1e-9
+
+
+@pytest.mark.parametrize(("integrator", "substeps"), [("rk4", 1), ("implicitfast", 4), ("euler", 2)])
+def test_push_with_other_integrators_is_measured_closely(integrator: str, substeps: int) -> None:
+    sim, log = simulate(spec_text(PUSH + f"  integrator: {integrator}\n  substeps: {substeps}\n"))
+    assert sim.mj_model.opt.timestep == pytest.approx(0.001 / substeps)
+    # One sensing step behind; not exact any more (the acceleration varies within a period).
+    error = np.abs(log.tau_ext_measured[52:150] - log.tau_ext_true[51:149]).max()
+    assert error < 0.01 * np.abs(log.tau_ext_true).max()
+
+
+def test_unmodelled_payload_shows_up_in_measured_torque() -> None:
+    scenario = "  duration: 1.0\n  payloads:\n    - {frame: tool, mass: 3.0, com: [0, 0, 0.05]}\n"
+    sim, log = simulate(spec_text(scenario))
+    assert np.all(log.tau_ext_true == 0.0)  # a payload is part of the robot, not a disturbance
+    k = log.steps - 1
+    weight = np.array([0, 0, -9.81 * 3.0, 0, 0, 0])
+    static = point_jacobian(sim.robot.model, log.q[k - 1], "tool", np.array([0, 0, 0.05])).T @ weight
+    assert np.abs(log.dq[-1]).max() < 0.01  # nearly at rest again: the weight is what is left
+    np.testing.assert_allclose(log.tau_ext_measured[k], static, atol=0.02 * np.abs(static).max())
+
+
+def test_joint_torque_profile_with_ramps() -> None:
+    profile = TorqueProfile(np.array([1.0, -2.0]), start=0.1, end=0.5, ramp=0.1)
+    t = np.array([0.0, 0.1, 0.15, 0.2, 0.3, 0.45, 0.5, 0.6])
+    np.testing.assert_allclose(profile.amplitude(t), [0, 0, 0.5, 1, 1, 0.5, 0, 0], atol=1e-12)
+    triangle = TorqueProfile(np.ones(1), start=0.0, end=0.1, ramp=0.1)
+    assert triangle.amplitude(np.array([0.05]))[0] == pytest.approx(0.5)
+    scenario = """  duration: 0.3
+  disturbances:
+    - {type: joint_torque, torque: [0, 0, 0, 0, 0, 0, 3], start: 0.1, duration: 0.1, ramp: 0.02}
+"""
+    _, log = simulate(spec_text(scenario))
+    k = round(0.11 / 0.001)  # half-way up the ramp
+    assert log.tau_ext_true[k, 6] == pytest.approx(1.5)
+    assert log.tau_ext_true[150, 6] == pytest.approx(3.0)
+    np.testing.assert_allclose(log.tau_ext_measured[151], log.tau_ext_true[150], atol=1e-9)
+
+
+def test_noisy_sensing_is_seeded_and_ignored_sensing_is_zero() -> None:
+    noisy = "  duration: 0.05\n  external_torque: {mode: noisy, noise_std: 0.5, bias: 1.0, seed: %d}\n"
+    _, a = simulate(spec_text(noisy % 7))
+    _, b = simulate(spec_text(noisy % 7))
+    _, c = simulate(spec_text(noisy % 8))
+    np.testing.assert_array_equal(a.tau_ext_measured, b.tau_ext_measured)
+    assert not np.array_equal(a.tau_ext_measured, c.tau_ext_measured)
+    assert np.mean(a.tau_ext_measured) == pytest.approx(1.0, abs=0.1)
+    _, ignored = simulate(spec_text(PUSH + "  external_torque: ignored\n"))
+    assert np.all(ignored.tau_ext_measured == 0.0)
+    assert np.abs(ignored.tau_ext_true).max() > 1.0
+
+
+def test_model_mismatch_scales_the_controllers_masses_only() -> None:
+    sim = prepare_simulation(load_spec_text(spec_text("  duration: 0.05\n  model_mismatch: {mass_scale: 1.3}\n")))
+    q = np.array([0.1, 0.6, 0.0, -1.2, 0.2, 0.8, 0.0])
+    true, controller = sim.robot.model, sim.controller_robot.model
+    g_true = pin.computeGeneralizedGravity(true, true.createData(), q)
+    g_ctrl = pin.computeGeneralizedGravity(controller, controller.createData(), q)
+    np.testing.assert_allclose(g_ctrl, 1.3 * g_true, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(mass_matrix(sim.mj_model, mujoco.MjData(sim.mj_model), q),
+                               _pin_mass(true, q), atol=1e-12)
+    assert sim.runtime.robot.model is controller
+    assert scaled_robot(sim.robot, 1.0) is sim.robot
+    # At rest under gravity compensation by a heavier model, the estimator sees the excess.
+    log = sim.run()
+    np.testing.assert_allclose(log.tau_ext_measured[1], pin.rnea(controller, controller.createData(), log.q[0],
+                               log.dq[0], log.ddq[0]) - log.tau[0], atol=1e-9)
+
+
+def _pin_mass(model: pin.Model, q: np.ndarray) -> np.ndarray:
+    M = pin.crba(model, model.createData(), q)
+    return np.triu(M) + np.triu(M, 1).T
+
+
+def test_mass_matrices_agree_along_a_simulated_trajectory() -> None:
+    sim, log = simulate(spec_text(PUSH))
+    data = mujoco.MjData(sim.mj_model)
+    for q in log.q[::20]:
+        M = _pin_mass(sim.robot.model, q)
+        assert np.abs(mass_matrix(sim.mj_model, data, q) - M).max() < 1e-12 * np.abs(M).max()
+
+
+def test_actual_acceleration_is_the_commanded_one_without_disturbance() -> None:
+    _, log = simulate(spec_text("  duration: 0.2\n"))
+    assert np.all(log.status >= 0)
+    np.testing.assert_allclose(log.ddq, log.ddq_commanded, atol=1e-8 * np.abs(log.ddq).max())
+
+
+def test_dcts_keeps_a_cartesian_bound() -> None:
+    tasks = """
+  - {name: reach, type: position, frame: tool, priority: 1, gains: {kp: 25, kd: 10}, reference: {position: [0.5, 0.0, 0.3]}}
+  - {name: damping, type: joint, priority: 2, gains: {kp: 0, kd: 5}}"""
+    limits = "cartesian:\n    - {frame: tool, axis: z, min: 0.45, max_acceleration: 2}"
+    for formulation, crosses in (("dcts", False), ("osc", True)):
+        sim, log = simulate(spec_text("  duration: 0.6\n", tasks, limits), formulation)
+        run = analyze(sim, log)
+        z = run.series.frame_positions["tool"][:, 2]
+        assert run.summary["solver_failures"] == 0
+        if crosses:  # OSC has no limits: the same task goes through the bound
+            assert z.min() < 0.4
+        else:
+            assert z.min() > 0.45 - 1e-4
+            assert run.summary["max_cartesian_violation"] < 1e-4
+
+
+def test_waypoints_are_fed_in_turn_and_their_times_recorded() -> None:
+    tasks = """
+  - {name: reach, type: position, frame: tool, priority: 1, gains: {kp: 400, kd: 40, max_velocity: 0.4}, reference: {input: true}}
+  - {name: damping, type: joint, priority: 2, gains: {kp: 0, kd: 5}}"""
+    points = [[0.68, 0.0, 0.51], [0.68, 0.02, 0.51], [0.66, 0.02, 0.52]]
+    scenario = f"  duration: 0.5\n  waypoints: {{task: reach, tolerance: 0.003, points: {points}}}\n"
+    sim, log = simulate(spec_text(scenario, tasks))
+    times = log.waypoint_times
+    assert np.all(np.isfinite(times)) and np.all(np.diff(times) > 0)
+    tool_path = analyze(sim, log).series.frame_positions["tool"]
+    for i, t in enumerate(times):
+        k = round(t / 0.001)
+        tool = tool_path[k]
+        assert np.linalg.norm(tool - points[i]) <= 0.003
+        np.testing.assert_allclose(log.ref[k - 1], points[i])  # fed until reached ...
+        np.testing.assert_allclose(log.ref[k], points[min(i + 1, 2)])  # ... then at once the next one
+    # The run goes on for its whole duration, holding the last point.
+    assert log.steps == 500
+    np.testing.assert_allclose(log.ref[-1], points[-1])
+
+
+def test_input_references_without_waypoints_hold_their_initial_value() -> None:
+    tasks = """
+  - {name: reach, type: pose, frame: tool, axes: [x, y, z, rx], priority: 1, gains: {kp: 100, kd: 20}, reference: {input: true}}
+  - {name: posture, type: joint, priority: 2, gains: {kp: 10, kd: 5}, reference: {input: true, feedforward: true}}"""
+    sim, log = simulate(spec_text("  duration: 0.1\n", tasks))
+    assert sim.initial_ref.size == 3 + 3 + 7 * 3
+    assert np.abs(log.q - log.q[0]).max() < 1e-6  # nothing to do: the robot stays put
+
+
+class _Exploding:
+    """A runtime that commands absurd torques: MuJoCo gives up."""
+
+    n, ref_layout, priorities = 7, [], [1, 2]
+
+    def step(self, q, dq, tau_ext=None, ref=None) -> StepResult:
+        return StepResult(np.full(7, 1e15), np.zeros(7), np.ones(2), 0, np.zeros(0))
+
+
+def test_unstable_simulation_stops_and_is_reported() -> None:
+    sim, log = simulate(spec_text("  duration: 0.1\n"), runtime=_Exploding())
+    assert log.diverged_at is not None and log.steps < 100
+    run = analyze(sim, log)
+    assert run.summary["completed"] is False
+
+
+def test_missing_scenario_and_unavailable_runtime() -> None:
+    text = spec_text("  duration: 0.1\n").split("scenario:")[0]
+    with pytest.raises(SpecError, match="no `scenario` section"):
+        prepare_simulation(load_spec_text(text))
+    with pytest.raises(ValueError, match="unknown runtime"):
+        make_runtime(load_spec_text(text), "fortran")
+
+
+@pytest.mark.slow
+def test_c_runtime_runs_the_same_closed_loop_as_python(tmp_path: Path) -> None:
+    text = spec_text(PUSH)
+    try:
+        c = prepare_simulation(load_spec_text(text), "c", work_dir=tmp_path)
+    except RuntimeUnavailable as error:
+        pytest.skip(str(error))
+    python = prepare_simulation(load_spec_text(text), "python")
+    c_log, python_log = c.run(), python.run()
+    np.testing.assert_allclose(c_log.tau, python_log.tau, atol=1e-6)
+    np.testing.assert_allclose(c_log.q, python_log.q, atol=1e-9)
+
+
+def test_c_runtime_cannot_simulate_model_mismatch(tmp_path: Path) -> None:
+    text = spec_text("  duration: 0.1\n  model_mismatch: {mass_scale: 1.2}\n")
+    with pytest.raises(RuntimeUnavailable, match="--runtime python"):
+        prepare_simulation(load_spec_text(text), "c", work_dir=tmp_path)
+
+
+# -- the command line ---------------------------------------------------------------------------
+
+
+def dcts(*args: str, cwd: Path = ROOT) -> subprocess.CompletedProcess:
+    script = Path(sys.executable).with_name("dcts")
+    command = [str(script)] if script.is_file() else [sys.executable, "-c", "from dcts_spec.cli import main; main()"]
+    return subprocess.run([*command, *args], cwd=cwd, capture_output=True, text=True, timeout=300)
+
+
+def test_simulate_writes_a_complete_output_directory(tmp_path: Path) -> None:
+    spec = tmp_path / "push.yaml"
+    spec.write_text(spec_text(PUSH))
+    out = tmp_path / "out"
+    result = dcts("simulate", str(spec), "--runtime", "python", "--out", str(out), "--duration", "0.2")
+    assert result.returncode == 0, result.stderr
+    assert "Traceback" not in result.stderr
+    names = {p.name for p in out.iterdir()}
+    assert {"log.npz", "summary.json", "joint_positions.png", "joint_velocities.png", "torques.png",
+            "task_errors.png", "scalings.png", "energies.png", "end_effector_path.png"} <= names
+    summary = json.loads((out / "summary.json").read_text())
+    from dcts_spec.analysis.metrics import SUMMARY_KEYS
+
+    for key in SUMMARY_KEYS:
+        value = summary[key]
+        values = value.values() if isinstance(value, dict) else [value]
+        assert all(isinstance(v, (int, float)) and np.isfinite(v) for v in values), key
+    assert summary["runtime"] == "python" and summary["formulation"] == "dcts"
+    log = np.load(out / "log.npz")
+    assert log["q"].shape == (200, 7) and log["position_tool"].shape == (200, 3)
+    assert {"tau_ext_true", "tau_ext_measured", "error_hold", "scaling", "status"} <= set(log.files)
+    assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []
+
+
+def test_failed_run_leaves_no_output_directory(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    spec = tmp_path / "push.yaml"
+    spec.write_text(spec_text("  duration: 0.02\n"))
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "old.txt").write_text("previous run")
+
+    def broken(*args, **kwargs):
+        raise OSError("disk full")
+
+    monkeypatch.setattr("dcts_spec.analysis.outputs.write_plots", broken)
+    with pytest.raises(OSError):
+        simulate_command(spec, out, RunOptions(runtime="python", quiet=True))
+    assert [p.name for p in out.iterdir()] == ["old.txt"]  # the previous output is untouched
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out", "push.yaml"]
+
+
+@pytest.mark.parametrize(
+    ("options", "formulation", "message"),
+    [
+        (RunOptions(runtime="python"), None, "no `scenario` section"),
+        (RunOptions(runtime="fortran"), None, "unknown runtime"),
+        (RunOptions(runtime="python"), "magic", "unknown formulation"),
+        (RunOptions(runtime="python", duration=-1.0), None, "--duration must be positive"),
+    ],
+)
+def test_bad_input_is_one_message_and_exit_1(tmp_path: Path, capsys: pytest.CaptureFixture, options: RunOptions,
+                                             formulation: str | None, message: str) -> None:
+    spec = tmp_path / "no_scenario.yaml"
+    spec.write_text(spec_text("  duration: 0.1\n").split("scenario:")[0])
+    out = tmp_path / "out"
+    assert simulate_command(spec, out, options, formulation) == 1
+    assert message in capsys.readouterr().err
+    assert not out.exists()
+
+
+def test_output_path_that_is_a_file_is_refused_before_running(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    spec = tmp_path / "s.yaml"
+    spec.write_text(spec_text("  duration: 0.02\n"))
+    (tmp_path / "taken").write_text("")
+    assert simulate_command(spec, tmp_path / "taken", RunOptions(runtime="python")) == 1
+    assert "exists and is not a directory" in capsys.readouterr().err
+
+
+def test_broken_spec_exits_1_with_its_location(tmp_path: Path) -> None:
+    spec = tmp_path / "broken.yaml"
+    spec.write_text(spec_text("  duration: -1\n"))
+    result = dcts("compare", str(spec), "--runtime", "python", "--out", str(tmp_path / "out"))
+    assert result.returncode == 1 and "Traceback" not in result.stderr
+    assert "broken.yaml:" in result.stderr and "duration" in result.stderr
+
+
+def test_viewer_without_display_warns_and_runs(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                               capsys: pytest.CaptureFixture) -> None:
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    monkeypatch.setattr(sys, "platform", "linux")
+    spec = tmp_path / "s.yaml"
+    spec.write_text(spec_text("  duration: 0.02\n"))
+    code = simulate_command(spec, tmp_path / "out", RunOptions(runtime="python", quiet=True), plots=False, viewer=True)
+    assert code == 0
+    assert "--viewer needs a display" in capsys.readouterr().err
+    assert (tmp_path / "out" / "summary.json").is_file()
+
+
+def test_video_without_encoder_says_so(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                       capsys: pytest.CaptureFixture) -> None:
+    monkeypatch.setattr("shutil.which", lambda name: None)
+    monkeypatch.setitem(sys.modules, "imageio_ffmpeg", None)  # makes the import fail
+    spec = tmp_path / "s.yaml"
+    spec.write_text(spec_text("  duration: 0.02\n"))
+    code = simulate_command(spec, tmp_path / "out", RunOptions(runtime="python", quiet=True),
+                            video=tmp_path / "run.mp4")
+    assert code == 1
+    assert "no MP4 encoder" in capsys.readouterr().err
+    assert not (tmp_path / "out").exists() and not (tmp_path / "run.mp4").exists()
+
+
+@pytest.mark.slow
+def test_video_is_rendered_where_possible(tmp_path: Path) -> None:
+    spec = tmp_path / "s.yaml"
+    spec.write_text(spec_text("  duration: 0.3\n"))
+    video = tmp_path / "run.mp4"
+    result = dcts("simulate", str(spec), "--runtime", "python", "--out", str(tmp_path / "out"),
+                  "--no-plots", "--video", str(video))
+    if result.returncode != 0:
+        assert "no MP4 encoder" in result.stderr or "no OpenGL backend" in result.stderr, result.stderr
+        pytest.skip(result.stderr.strip())
+    assert video.stat().st_size > 1000
+
+
+def test_compare_writes_tables_and_overlays(tmp_path: Path) -> None:
+    spec = tmp_path / "push.yaml"
+    spec.write_text(spec_text(PUSH))
+    out = tmp_path / "cmp"
+    result = dcts("compare", str(spec), "--runtime", "python", "--formulations", "dcts,osc", "--out", str(out),
+                  "--duration", "0.1", "--quiet")
+    assert result.returncode == 0, result.stderr
+    assert result.stdout == ""
+    table = json.loads((out / "comparison.json").read_text())
+    assert set(table) == {"dcts", "osc"}
+    markdown = (out / "comparison.md").read_text()
+    assert "| metric | dcts | osc |" in markdown and "task_rms_error[hold]" in markdown
+    for name in ("compare_task_errors", "compare_scalings", "compare_energies", "compare_joint_velocities",
+                 "compare_end_effector_path"):
+        assert (out / f"{name}.png").is_file()
+    assert (out / "dcts" / "log.npz").is_file() and (out / "osc" / "summary.json").is_file()
