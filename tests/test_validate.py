@@ -148,3 +148,25 @@ def test_warnings_through_the_cli(warning_specs: tuple[Path, Path]) -> None:
     report = json.loads(result.stdout)
     assert report["valid"] is True
     assert 6 in [d["line"] for d in report["diagnostics"] if d["severity"] == "warning"]
+
+
+def test_any_urdf_by_path(tmp_path: Path) -> None:
+    """A URDF given by a path relative to the spec file, and one by an absolute path (UR5)."""
+    from dcts_spec.robot.builtin import example_robot_data_dir, iiwa14_urdf_path
+    from dcts_spec.validate import validate_file
+
+    (tmp_path / "robots").mkdir()
+    (tmp_path / "robots" / "arm.urdf").write_text(iiwa14_urdf_path().read_text())
+    ur5 = example_robot_data_dir() / "ur_description" / "urdf" / "ur5_robot.urdf"
+    for urdf, frame, n in (("robots/arm.urdf", "tool", 7), (str(ur5), "tool0", 6)):
+        spec = tmp_path / "spec.yaml"
+        spec.write_text(
+            "version: 1\nname: by_path\n"
+            f"robot: {{urdf: {urdf}}}\n"
+            "tasks:\n"
+            f"  - {{name: reach, type: position, frame: {frame}, priority: 1, gains: {{kp: 10, kd: 6}}, "
+            "reference: {position: [0.4, 0.1, 0.4]}}\n"
+        )
+        report = validate_file(spec)
+        assert report.robot.nv == n
+        assert report.levels[0].dimension == 3
