@@ -48,7 +48,7 @@ class StepResult:
 
     tau: np.ndarray  # joint torques to apply (gravity included), within the torque limits
     ddq: np.ndarray  # commanded joint acceleration M⁻¹(τ − ν − g); the actual one adds M⁻¹τ_ext
-    scaling: np.ndarray  # one task scaling factor per priority level, highest first (1 = not scaled)
+    scaling: np.ndarray  # one task scaling factor per priority level, highest first, in [0, 1] (1 = not scaled)
     status: int  # STATUS_* code; negative means the fallback torque was applied
     x: np.ndarray  # the QP solution (empty for closed forms)
 
@@ -208,7 +208,7 @@ class Controller:
             return StepResult(self.fallback_torque(q, dq), np.zeros(self.n), np.zeros(levels), STATUS_INVALID_OUTPUT, x)
         self._last_gravity = np.array(self.gravity_function(q)).ravel()
         ddq = data["ddq0"].ravel() + data["Q"] @ x
-        scaling = data["s0"].ravel() + data["S"] @ x
+        scaling = np.clip(data["s0"].ravel() + data["S"] @ x, 0.0, 1.0)
         return StepResult(np.clip(tau, -self.tau_max, self.tau_max), ddq, scaling, status, x)
 
 

@@ -255,6 +255,9 @@ def _torque_design(robot: str, which: str) -> tuple[str, State]:
                     absorbed entirely by level 2 → s₁ = 1, s₂ < 1.
       three_levels: the same with a small tilt (0.02 rad, kp 30) @2 and a joint-1 posture 1 rad away
                     with kp = 1000 @3: levels 1–2 fit, level 3 does not → s₁ = s₂ = 1, s₃ < 1.
+      posture_last: as three_levels, but level 3 is a posture of all joints (joint 1 one rad away), which
+                    is over-constrained (least squares): its scaling is the share of its correction
+                    achieved, < 1 here, and the levels above keep s = 1.
       top_too:      level 1 = tool position 0.3 m away with kp = 1000 (300 m/s²): even without level 2
                     the torque limits cannot hold it → both scaled, s₂ ≤ s₁ < 1.
     """
@@ -263,7 +266,7 @@ def _torque_design(robot: str, which: str) -> tuple[str, State]:
     tool = TOOL[robot]
     tau_max = np.ceil(np.abs(_gravity(robot, q0))) + 3.0
     offset, kp1 = (np.array([0.0, 0.3, 0.0]), 1000) if which == "top_too" else (np.array([0.0, 0.01, 0.0]), 40)
-    tilt, kp2 = (0.02, 30) if which == "three_levels" else (0.7, 1000)
+    tilt, kp2 = (0.02, 30) if which in ("three_levels", "posture_last") else (0.7, 1000)
     rotation = pin.exp3(tilt * np.array([1.0, 1.0, 0.0]) / np.sqrt(2.0)) @ pose.rotation
     tasks = [
         f"{{name: reach, type: position, frame: {tool}, priority: 1, gains: {{kp: {kp1}, kd: 12}}, "
@@ -277,6 +280,10 @@ def _torque_design(robot: str, which: str) -> tuple[str, State]:
             f"{{name: swing, type: joint, joints: [{joint}], priority: 3, gains: {{kp: 1000, kd: 40}}, "
             f"reference: {{q: {_fmt(q0[0] + 1.0)}}}}}"
         )
+    if which == "posture_last":
+        target = q0.copy()
+        target[0] += 1.0
+        tasks.append(f"{{name: posture, type: joint, priority: 3, gains: {{kp: 1000, kd: 40}}, reference: {{q: {_fmt(target)}}}}}")
     limits = f"  joint_torque: {{max: {_fmt(tau_max)}}}\n"
     text = spec_text(robot, "\n".join(f"  - {t}" for t in tasks), limits, name=f"torque_{which}")
     return text, State(q0.copy(), np.zeros(7), np.zeros(7))
@@ -330,7 +337,7 @@ def _bound_design(robot: str, which: str) -> tuple[str, State]:
     return text, State(q0, dq, np.zeros(7))
 
 
-TORQUE_DESIGNS = ("two_levels", "three_levels", "top_too")
+TORQUE_DESIGNS = ("two_levels", "three_levels", "posture_last", "top_too")
 BOUND_DESIGNS = ("joint_position", "joint_velocity", "cartesian")
 
 
@@ -367,7 +374,7 @@ def test_p4_torque_limits_scale_lowest_priority_first(robot, which):
         # level 2; hence 1e-5 here, not the 1e-8 of P1.
         assert s[0] >= 1 - 1e-6 and s[1] < 0.9, s
         assert np.abs(residuals[0]).max() < 1e-5 * max(1.0, np.abs(levels[0][2]).max()), residuals[0]
-    elif which == "three_levels":
+    elif which in ("three_levels", "posture_last"):
         assert s[0] >= 1 - 1e-6 and s[1] >= 1 - 1e-6 and s[2] < 0.9, s
         for i in (0, 1):
             assert np.abs(residuals[i]).max() < 1e-5 * max(1.0, np.abs(levels[i][2]).max()), (i, residuals[i])
@@ -378,7 +385,7 @@ def test_p4_torque_limits_scale_lowest_priority_first(robot, which):
 def test_p4_torque_designs_are_clear_cut():
     """The premise of the two-/three-level designs: without the lowest level, the closed form fits the limits."""
     for robot in ROBOTS:
-        for which, drop in (("two_levels", 2), ("three_levels", 3), ("top_too", 2)):
+        for which, drop in (("two_levels", 2), ("three_levels", 3), ("posture_last", 3), ("top_too", 2)):
             key, st = design(robot, which)
             c = controller(key, "dcts")
             tasks = copy.deepcopy(tasks_of(key, c))

@@ -37,12 +37,13 @@ from dataclasses import dataclass
 
 import casadi as ca
 
-from ..symbolic.linalg import null_space_basis
+from ..symbolic.linalg import cholesky, cholesky_solve, null_space_basis
 from .hierarchy import LevelStructure, least_squares_objective, level_structure, recursive_hierarchy
 from .problem import ControlProblem
 from .qp import INF, Affine, ControlLaw, with_limits
 
 SCALING_PREFERENCE = 10.0  # κ: changing a task's direction costs this much more than scaling it
+SCALING_FLOOR = 1e-6  # (task acceleration)²: below this a least-squares level needs no correction
 
 
 @dataclass
@@ -59,6 +60,12 @@ class HierarchyQP:
     ubx: list
     scaling_columns: list[int]  # x index of each exact level's s
     z_columns: list[int]
+
+    @property
+    def unconstrained_z(self) -> ca.SX:
+        """z at the optimum without bounds (s = 1, δ = 0): H_zz z = −f_z."""
+        z = self.z_columns
+        return cholesky_solve(cholesky(self.hessian[z, z]), -self.gradient[z])
 
 
 def hierarchy_qp(problem: ControlProblem) -> HierarchyQP:
@@ -101,7 +108,7 @@ def hierarchy_qp(problem: ControlProblem) -> HierarchyQP:
         matrix[:, z_columns] = Z
         if structure.least_squares_last:
             last = levels[-1]
-            Hz, fz = least_squares_objective(last, nominal, Z, problem.mass_matrix, last.weight)
+            Hz, fz = least_squares_objective(last, nominal, Z, problem.mass_matrix, last.weight, normalized=True)
             H[z_columns, z_columns] = Hz
             f[z_columns] = fz
         else:
@@ -114,13 +121,22 @@ def hierarchy_qp(problem: ControlProblem) -> HierarchyQP:
 
 
 def level_scaling(problem: ControlProblem, hqp: HierarchyQP, nx: int) -> Affine:
-    """One scaling per priority level: sᵢ for exact levels, 1 for a least-squares level."""
-    levels = len(problem.levels)
-    offset = ca.SX.ones(levels)
-    matrix = ca.SX(levels, nx)
+    """One scaling per priority level: sᵢ for exact levels; for a least-squares lowest level, the
+    share of its unconstrained correction that is achieved, ⟨J Z z, J Z z*⟩/‖J Z z*‖² (1 when the
+    bounds leave it alone, less when they make it give in; 1 when it needs no correction)."""
+    levels = problem.levels
+    offset = ca.SX.ones(len(levels))
+    matrix = ca.SX(len(levels), nx)
     for i, column in enumerate(hqp.scaling_columns):
         offset[i] = 0.0
         matrix[i, column] = 1.0
+    z = hqp.z_columns
+    if hqp.structure.least_squares_last and z:
+        JZ = ca.mtimes(levels[-1].jacobian, hqp.acceleration.matrix[:, z])
+        wanted = ca.mtimes(JZ, hqp.unconstrained_z)
+        norm = ca.sumsqr(wanted) + SCALING_FLOOR
+        offset[-1] = SCALING_FLOOR / norm
+        matrix[-1, z] = ca.mtimes(wanted.T, JZ) / norm
     return Affine(offset, matrix)
 
 

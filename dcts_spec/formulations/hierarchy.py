@@ -80,7 +80,7 @@ def recursive_hierarchy(
 
 
 def least_squares_objective(
-    level: Level, acceleration: ca.SX, basis: ca.SX, mass: ca.SX, weight: float
+    level: Level, acceleration: ca.SX, basis: ca.SX, mass: ca.SX, weight: float, normalized: bool = False
 ) -> tuple[ca.SX, ca.SX]:
     """Hessian and gradient in z of  w‖J(a + B z) + J̇q̇ − ẍ_d‖² + ε w ½‖B z‖²_M.
 
@@ -88,9 +88,13 @@ def least_squares_objective(
     with a pseudo-inverse, a + J̄⁺(ẍ_d − J̇q̇ − J a), also when J B has lost rank: the task is met
     in least squares, the rest at minimum energy. A damped task-space inverse
     (J N M⁻¹ NᵀJᵀ + λ²I)⁻¹ would be hopelessly ill-conditioned there instead.
+    `normalized` divides w by ‖ẍ_d − J̇q̇ − J a‖² + 1, as dcts does for δ: against higher levels in
+    a QP, a level far from its target must not weigh more because its error is large.
     """
     JB = ca.mtimes(level.jacobian, basis)
     residual = level.target - level.bias - ca.mtimes(level.jacobian, acceleration)
+    if normalized:
+        weight = weight / (ca.sumsqr(residual) + 1.0)
     hessian = 2.0 * weight * ca.mtimes(JB.T, JB) + LEAST_SQUARES_ENERGY_RATIO * weight * ca.mtimes([basis.T, mass, basis])
     return hessian, -2.0 * weight * ca.mtimes(JB.T, residual)
 

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import casadi as ca
 
-from ..symbolic.linalg import cholesky, cholesky_solve
 from .dcts import hierarchy_qp
 from .problem import ControlProblem
 from .qp import Affine, ControlLaw
@@ -22,9 +21,7 @@ def osc(problem: ControlProblem) -> ControlLaw:
     acceleration = hqp.nominal_acceleration
     z = hqp.z_columns
     if z and hqp.structure.least_squares_last:
-        # Unconstrained optimum of the least-squares level: H_zz z = −f_z.
-        Hz = hqp.hessian[z, z]
-        acceleration = acceleration + ca.mtimes(hqp.acceleration.matrix[:, z], cholesky_solve(cholesky(Hz), -hqp.gradient[z]))
+        acceleration = acceleration + ca.mtimes(hqp.acceleration.matrix[:, z], hqp.unconstrained_z)
     torque = Affine.constant(problem.torque(acceleration), 0)
     scaling = Affine.constant(ca.SX.ones(len(problem.levels)), 0)
     return ControlLaw(torque, scaling, enforces_torque_limits=False)
