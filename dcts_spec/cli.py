@@ -77,6 +77,8 @@ def schema(
 
 
 _RUNTIME_HELP = "controller in the loop: c (the generated C bundle) or python (CasADi from Python)"
+_CACHE_HELP = ("c runtime: reuse the built bundle from the cache ($DCTS_CACHE_DIR or ~/.cache/dcts/bundles); "
+               "--no-cache builds it afresh and leaves the cache alone")
 
 
 @app.command()
@@ -90,6 +92,7 @@ def simulate(
     viewer: Annotated[bool, typer.Option("--viewer", help="watch the run in MuJoCo's viewer (needs a display)")] = False,
     video: Annotated[Optional[Path], typer.Option(help="render the run offscreen to this MP4 file")] = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="no progress bar, no summary")] = False,
+    cache: Annotated[bool, typer.Option("--cache/--no-cache", help=_CACHE_HELP)] = True,
 ) -> None:
     """Run the compiled controller against MuJoCo through the spec's scenario; write log, summary, plots."""
     from .sim.display import choose_gl_backend
@@ -98,7 +101,7 @@ def simulate(
         choose_gl_backend()  # before MuJoCo is imported
     from .sim.commands import RunOptions, simulate_command
 
-    options = RunOptions(runtime=runtime, duration=duration, quiet=quiet)
+    options = RunOptions(runtime=runtime, duration=duration, quiet=quiet, cache=cache)
     raise typer.Exit(simulate_command(file, out, options, formulation, plots, viewer, video))
 
 
@@ -110,12 +113,13 @@ def compare(
     runtime: Annotated[str, typer.Option(help=_RUNTIME_HELP)] = "c",
     duration: Annotated[Optional[float], typer.Option(help="override scenario.duration, in s")] = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="no progress bar, no table")] = False,
+    cache: Annotated[bool, typer.Option("--cache/--no-cache", help=_CACHE_HELP)] = True,
 ) -> None:
     """Run the same scenario with several formulations; write a metrics table and overlay plots."""
     from .sim.commands import RunOptions, compare_command
 
     names = [f.strip() for f in formulations.split(",") if f.strip()]
-    options = RunOptions(runtime=runtime, duration=duration, quiet=quiet)
+    options = RunOptions(runtime=runtime, duration=duration, quiet=quiet, cache=cache)
     raise typer.Exit(compare_command(file, out, options, names))
 
 

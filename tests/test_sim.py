@@ -12,7 +12,12 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
+from typer.testing import CliRunner
+
 from dcts_spec.analysis.run import analyze
+from dcts_spec.cli import app
+from dcts_spec.codegen import model_digest
+from dcts_spec.codegen.bundle import spec_digest
 from dcts_spec.controller import StepResult
 from dcts_spec.sim.commands import RunOptions, simulate_command
 from dcts_spec.sim.mismatch import scaled_robot
@@ -24,6 +29,12 @@ from dcts_spec.spec import SpecError, load_spec_text
 
 ROOT = Path(__file__).resolve().parents[1]
 HOME = "[0, 0.6, 0, -1.2, 0, 0.8, 0]"
+
+
+@pytest.fixture(autouse=True)
+def _private_bundle_cache(tmp_path_factory, monkeypatch):
+    """No test writes into the user's bundle cache (the C runtime loads its bundles from there)."""
+    monkeypatch.setenv("DCTS_CACHE_DIR", str(tmp_path_factory.getbasetemp() / "bundle-cache"))
 
 
 def spec_text(scenario: str, tasks: str = "", limits: str = "joint_torque: {max: 300, allow_outside_urdf: true}") -> str:
@@ -242,7 +253,7 @@ def test_missing_scenario_and_unavailable_runtime() -> None:
 def test_c_runtime_runs_the_same_closed_loop_as_python(tmp_path: Path) -> None:
     text = spec_text(PUSH)
     try:
-        c = prepare_simulation(load_spec_text(text), "c", work_dir=tmp_path)
+        c = prepare_simulation(load_spec_text(text), "c", work_dir=tmp_path, cache=False)
     except RuntimeUnavailable as error:
         pytest.skip(str(error))
     python = prepare_simulation(load_spec_text(text), "python")
@@ -251,10 +262,54 @@ def test_c_runtime_runs_the_same_closed_loop_as_python(tmp_path: Path) -> None:
     np.testing.assert_allclose(c_log.q, python_log.q, atol=1e-9)
 
 
-def test_c_runtime_cannot_simulate_model_mismatch(tmp_path: Path) -> None:
-    text = spec_text("  duration: 0.1\n  model_mismatch: {mass_scale: 1.2}\n")
-    with pytest.raises(RuntimeUnavailable, match="--runtime python"):
-        prepare_simulation(load_spec_text(text), "c", work_dir=tmp_path)
+def test_c_runtime_simulates_model_mismatch_like_python(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The C bundle is generated for the controller's (scaled) model, says so, runs the same
+    closed loop as the Python runtime, and the next run loads it from the cache."""
+    monkeypatch.setenv("DCTS_CACHE_DIR", str(tmp_path / "cache"))
+    text = spec_text(PUSH + "  model_mismatch: {mass_scale: 1.2}\n")
+    try:
+        c = prepare_simulation(load_spec_text(text), "c")
+    except RuntimeUnavailable as error:
+        pytest.skip(str(error))
+    python = prepare_simulation(load_spec_text(text), "python")
+    c_log, python_log = c.run(), python.run()
+    np.testing.assert_allclose(c_log.tau, python_log.tau, atol=1e-6)
+    np.testing.assert_allclose(c_log.q, python_log.q, atol=1e-9)
+    matched = prepare_simulation(load_spec_text(spec_text(PUSH)), "python").run()
+    assert np.max(np.abs(matched.tau - c_log.tau)) > 0.1  # the mismatch shows
+
+    manifest = c.runtime.manifest
+    assert manifest["model"]["modified"] and manifest["model"]["changes"] == {"mass_scale": 1.2}
+    assert manifest["model_sha256"] == model_digest(c.controller_robot) != model_digest(c.robot)
+    assert manifest["spec_sha256"] == spec_digest(load_spec_text(text))
+    header = (c.runtime.directory / "sim_case.h").read_text()
+    assert "#define SIM_CASE_MODEL_MODIFIED 1" in header and "mass_scale = 1.2" in header
+    assert analyze(c, c_log).summary["mass_scale"] == 1.2
+
+    again = prepare_simulation(load_spec_text(text), "c")
+    assert again.runtime.directory == c.runtime.directory
+    assert [p.name for p in (tmp_path / "cache").iterdir() if not p.name.startswith(".")] == [c.runtime.directory.name]
+
+
+def test_no_cache_option_builds_in_a_temporary_directory(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    calls = []
+
+    def prepare(spec, runtime, formulation, duration, work_dir=None, cache=True):
+        calls.append((runtime, work_dir, cache))
+        raise RuntimeUnavailable("stop here")
+
+    monkeypatch.setattr("dcts_spec.sim.commands.prepare_simulation", prepare)
+    spec = tmp_path / "s.yaml"
+    spec.write_text(spec_text("  duration: 0.02\n"))
+    runner = CliRunner()
+    for command in ("simulate", "compare"):
+        for flag, cached in (("--no-cache", False), ("--cache", True)):
+            result = runner.invoke(app, [command, str(spec), flag, "--out", str(tmp_path / "out"), "-q"])
+            assert result.exit_code == 1 and "stop here" in result.output
+            runtime, work_dir, cache = calls[-1]
+            assert runtime == "c" and cache is cached
+            if not cached:
+                assert work_dir is not None and not Path(work_dir).exists()  # removed after the run
 
 
 # -- the command line ---------------------------------------------------------------------------

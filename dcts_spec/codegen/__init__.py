@@ -2,16 +2,20 @@
 
     compile_c(spec, out_dir)   write and build the bundle, return the loaded C controller
     load_bundle(out_dir)       load a built bundle
+    BundleCache()              built bundles, reused across runs (`dcts simulate`, `dcts compare`)
 """
 
 from __future__ import annotations
 
 from pathlib import Path
 
+from ..robot.model import Robot
 from ..spec import Spec
 from .build import BuildReport, compile_bundle, daqp_sources
 from .bundle import CodegenError
+from .cache import BundleCache, default_cache_dir
 from .loader import CompiledController, load_bundle
+from .model import model_digest
 
 
 def compile_c(
@@ -19,18 +23,25 @@ def compile_c(
     out_dir: str | Path,
     formulation: str | None = None,
     build: bool = True,
+    robot: Robot | None = None,
+    model_changes: dict | None = None,
     **options,
 ) -> CompiledController | BuildReport:
     """Generate the C bundle of a spec (a Spec or a file) into out_dir.
 
     With build=True (the default) the host library is built and checked against the golden
     vectors, and the loaded CompiledController is returned (same `step` as the Python runtime).
-    With build=False only the sources are written and the BuildReport is returned. Options are
-    passed to `compile_bundle` (target, cc, daqp_src, warm_start, golden_count, qemu).
+    With build=False only the sources are written and the BuildReport is returned.
+
+    `robot` compiles the controller for another model than the spec's robot (model mismatch,
+    e.g. `sim.mismatch.scaled_robot(robot, 1.2)`), `model_changes` says how it differs (e.g.
+    {"mass_scale": 1.2}); the manifest and the header record it. Other options are passed to
+    `compile_bundle` (target, cc, daqp_src, warm_start, golden_count, qemu).
     """
-    report = compile_bundle(spec, out_dir, formulation=formulation, build=build, **options)
+    report = compile_bundle(spec, out_dir, formulation=formulation, build=build, robot=robot,
+                            model_changes=model_changes, **options)
     return load_bundle(report.directory) if build else report
 
 
-__all__ = ["BuildReport", "CodegenError", "CompiledController", "compile_bundle", "compile_c", "daqp_sources",
-           "load_bundle"]
+__all__ = ["BuildReport", "BundleCache", "CodegenError", "CompiledController", "compile_bundle", "compile_c",
+           "daqp_sources", "default_cache_dir", "load_bundle", "model_digest"]

@@ -20,8 +20,10 @@ from pathlib import Path
 import casadi
 
 from ..controller import Controller
+from ..robot.model import Robot
 from ..spec import Spec, load_spec
 from .bundle import GENERATOR, HEAP_SENTINEL, CodegenError, generate_sources
+from .model import model_record
 
 DAQP_SDIST_VERSION = "0.11.0"
 CACHE_DIR = Path(os.environ.get("DCTS_CACHE", Path.home() / ".cache" / "dcts"))
@@ -200,15 +202,28 @@ def _load(spec: Spec | str | Path) -> tuple[Spec, bytes | None]:
     return load_spec(path), path.read_bytes() if path.is_file() else None
 
 
-def make_controller(spec: Spec, formulation: str | None = None) -> Controller:
-    """Validate and compile the spec for the Python runtime (SpecError on a broken spec)."""
+def make_controller(spec: Spec, formulation: str | None = None, robot: Robot | None = None) -> Controller:
+    """Validate and compile the spec for the Python runtime (SpecError on a broken spec).
+
+    `robot` replaces the spec's robot as the controller's model (model mismatch)."""
+    return _controller_and_model(spec, formulation, robot)[0]
+
+
+def _controller_and_model(spec: Spec, formulation: str | None, robot: Robot | None,
+                          changes: dict | None = None) -> tuple[Controller, dict]:
+    """The controller and the manifest's record of its model (see model.model_record)."""
     from ..validate import validate_spec
 
     report = validate_spec(spec)
+    model = robot if robot is not None else report.robot
+    if model.nv != report.robot.nv or model.joint_names != report.robot.joint_names:
+        raise CodegenError(f"the robot model ({model.nv} joints: {', '.join(model.joint_names)}) does not have the "
+                           f"spec's joints ({', '.join(report.robot.joint_names)})")
     try:
-        return Controller(spec, report.robot, formulation)
+        controller = Controller(spec, model, formulation)
     except ValueError as exc:
         raise CodegenError(str(exc)) from None
+    return controller, model_record(model, report.robot, changes)
 
 
 def _text_size(path: Path) -> int:
@@ -344,8 +359,15 @@ def compile_bundle(
     warm_start: bool = False,
     golden_count: int | None = None,
     qemu: bool = True,
+    robot: Robot | None = None,
+    model_changes: dict | None = None,
 ) -> BuildReport:
     """Generate (and build) the C bundle of a spec into out_dir, atomically.
+
+    `robot` is the controller's model when it is not the spec's own (model mismatch, e.g.
+    `sim.mismatch.scaled_robot`); `model_changes` says how it differs (e.g. {"mass_scale": 1.2}).
+    The manifest (`model`, `model_sha256`) and the header then say that the bundle was
+    generated for a modified model; the spec's SHA-256 stays that of the spec.
 
     Raises SpecError for a broken spec and CodegenError for everything else; in both cases
     nothing is left at out_dir (an older bundle there stays untouched)."""
@@ -356,7 +378,7 @@ def compile_bundle(
         raise CodegenError(f"invalid output directory {out_dir}")
     _check_output(out_dir)
     spec_obj, spec_bytes = _load(spec)
-    controller = make_controller(spec_obj, formulation)
+    controller, model = _controller_and_model(spec_obj, formulation, robot, model_changes)
 
     created = _make_parents(out_dir.parent)
     try:
@@ -371,7 +393,8 @@ def compile_bundle(
         daqp_include, daqp_library = casadi_daqp() if controller.nx else ("", "")
         kwargs = {} if golden_count is None else {"golden_count": golden_count}
         sources = generate_sources(controller, tmp, spec_bytes=spec_bytes, warm_start=warm_start,
-                                   daqp_include=str(daqp_include), daqp_library=str(daqp_library), **kwargs)
+                                   daqp_include=str(daqp_include), daqp_library=str(daqp_library), model=model,
+                                   **kwargs)
         manifest = sources.manifest
         report = BuildReport(out_dir, manifest, build)
         if build:

@@ -23,6 +23,7 @@ from .. import controller as runtime
 from ..controller import DATA_OUTPUTS, TORQUE_TOLERANCE, Controller
 from ..spec import Spec
 from .layout import workspace_struct
+from .model import describe_changes, model_record
 from .states import State, golden_states
 
 GENERATOR = "dcts-spec"
@@ -39,9 +40,17 @@ def relaxation_weight() -> float:
     return float(getattr(qp_module, "RELAXATION_WEIGHT", 1e3))
 
 
+# DAQP 0.5.1's defaults (the DAQP the Python runtime runs, inside casadi) that later versions
+# changed: pinned, so that any DAQP the bundle is built with solves the same QP the same way.
+# DAQP >= 0.6 defaults to eps_prox = -1e-6 (a proximal term switched on for ill-conditioned
+# Hessians), which cycles to the iteration limit on the DCTS QPs (Hessian diagonals from ~1e-2
+# to ~1e10) that 0.5.1 solves in a few iterations; and to pivot_tol = 1e-8.
+DAQP_PINNED_SETTINGS = {"eps_prox": 0.0, "pivot_tol": 1e-6}
+
+
 def daqp_settings() -> dict:
     """The DAQP settings of the Python runtime (so both solve the same QP the same way)."""
-    settings = {"iter_limit": ITER_LIMIT, **getattr(runtime, "DAQP_SETTINGS", {})}
+    settings = {"iter_limit": ITER_LIMIT, **DAQP_PINNED_SETTINGS, **getattr(runtime, "DAQP_SETTINGS", {})}
     unknown = [k for k in settings if k not in DAQP_INT_SETTINGS + DAQP_FLOAT_SETTINGS]
     if unknown:
         raise CodegenError(f"DAQP settings {unknown} are not known to the C generator")
@@ -372,6 +381,26 @@ def _fmt_list(values) -> str:
     return "[" + ", ".join(f"{v:g}" for v in values) + "]"
 
 
+def _model_texts(model: dict) -> tuple[str, str]:
+    """The header's and the README's note on the robot model (modified or the spec's own)."""
+    if not model["modified"]:
+        text = f"the spec's robot (model SHA-256 {model['sha256']})"
+        return text, text
+    changes = describe_changes(model.get("changes", {}))
+    header = (
+        f"MODIFIED, not the spec's robot: {changes};\n"
+        f" *                model SHA-256 {model['sha256']}\n"
+        f" *                (the spec's robot: {model['spec_model_sha256']}).\n"
+        f" *                Generated for this model (model mismatch); the spec SHA-256 above is unchanged."
+    )
+    readme = (
+        f"**modified**, not the spec's robot: {changes}; model SHA-256 `{model['sha256']}` (the spec's "
+        f"robot: `{model['spec_model_sha256']}`). The controller was generated for this model (model "
+        "mismatch); the spec's SHA-256 is unchanged."
+    )
+    return header, readme
+
+
 def generate_sources(
     controller: Controller,
     directory: Path,
@@ -381,8 +410,12 @@ def generate_sources(
     warm_start: bool = False,
     daqp_include: str = "",
     daqp_library: str = "",
+    model: dict | None = None,
 ) -> BundleSources:
-    """Write every source file of the bundle into `directory` (which must exist)."""
+    """Write every source file of the bundle into `directory` (which must exist).
+
+    `model` is the manifest's record of the robot model (`model.model_record`); by default the
+    controller's robot is taken to be the spec's own."""
     spec = controller.spec
     name = spec.name
     big = name.upper()
@@ -398,6 +431,8 @@ def generate_sources(
     damping = np.asarray(controller.fallback_damping, dtype=float)
     digest = spec_digest(spec, spec_bytes)
     spec_file = Path(spec.source.file).name if spec.source.file else "<spec>"
+    model = model or model_record(controller.robot, controller.robot)
+    model_header, model_readme = _model_texts(model)
 
     settings = daqp_settings()
     work = generate_casadi(controller, name, directory)
@@ -429,6 +464,10 @@ def generate_sources(
         "VERSION": version(),
         "SPEC_FILE": spec_file,
         "SPEC_SHA256": digest,
+        "MODEL_TEXT": model_header,
+        "MODEL_README": model_readme,
+        "MODEL_SHA256": model["sha256"],
+        "MODEL_MODIFIED": int(bool(model["modified"])),
         "FORMULATION": controller.formulation,
         "FORMULATION_KIND": "QP" if nx else "closed form",
         "ROBOT": controller.robot.name,
@@ -507,6 +546,8 @@ def generate_sources(
         "name": name,
         "spec_file": str(spec.source.file),
         "spec_sha256": digest,
+        "model_sha256": model["sha256"],
+        "model": model,
         "formulation": controller.formulation,
         "robot": controller.robot.name,
         "joints": controller.robot.joint_names,

@@ -13,15 +13,19 @@ from ..tasks import ReferenceInput
 from .bundle import CodegenError
 from .layout import info_struct, workspace_struct
 
-_DOUBLE_P = ctypes.POINTER(ctypes.c_double)
-
 
 class CompiledController:
     """The generated C controller, loaded from a bundle directory (or its manifest).
 
-    `step(q, dq, tau_ext=None, ref=None)` returns a StepResult like `Controller.step`; the C
-    workspace keeps the same history the Python runtime keeps (the last finite q) plus the
-    QP solver's warm start.
+    `step(q, dq, tau_ext=None, ref=None)` returns a StepResult like `Controller.step` (fresh
+    arrays, never views of internal buffers); `step_into` is the allocation-free variant for
+    loops that keep their own arrays (the simulation). The C workspace keeps the same history
+    the Python runtime keeps (the last finite q) plus the QP solver's warm start. One
+    controller must not be stepped from several threads at once (neither may the C workspace).
+
+    Per step, the inputs are copied into buffers allocated once (their addresses are passed to
+    C as prepared `c_void_p` arguments), and the outputs are read from numpy views of those
+    buffers and of the C `info` struct: no ctypes conversion work beyond the call itself.
     """
 
     def __init__(self, directory: str | Path):
@@ -41,6 +45,9 @@ class CompiledController:
         self.tau_max = np.array(m["tau_max"], dtype=float)
         self.fallback_damping = np.array(m["fallback_damping"], dtype=float)
         self.spec_sha256: str = m["spec_sha256"]
+        # The robot model it was generated for (bundles from before the model record: the spec's).
+        self.model_sha256: str | None = m.get("model_sha256")
+        self.model_modified: bool = bool((m.get("model") or {}).get("modified", False))
         self.variables: list[str] = list(m["variables"])
         library = self.directory / m["library"]
         if not library.is_file():
@@ -59,12 +66,32 @@ class CompiledController:
         self._storage = np.zeros(self.workspace_bytes // 8 + 1, dtype=np.float64)
         self._ws = ctypes.c_void_p(self._storage.ctypes.data)
         self._info = self._Info()
-        self._tau = np.zeros(self.n)
-        self._zeros = np.zeros(self.n)
-        self._empty_ref = np.zeros(1)
+        self._prepare_buffers()
         if self._init(self._ws) != 0:
             raise CodegenError(f"{self.name}_init failed (out of memory?)")
         self._open = True
+
+    def _prepare_buffers(self) -> None:
+        """Input and output buffers, allocated once, and the call's arguments pointing at them."""
+        n, levels = self.n, len(self.priorities)
+        self._shape = (n,)
+        self._ref_shape = (self.ref_size,)
+        self._q, self._dq, self._tau_ext, self._tau = (np.zeros(n) for _ in range(4))
+        self._ref = np.zeros(max(self.ref_size, 1))
+        self._ref_in = self._ref[: self.ref_size]  # what a reference is copied into
+        # Views of the info struct's arrays (they share its memory; the views keep it alive).
+        self._ddq_out = np.ctypeslib.as_array(self._info.ddq)[:n]
+        self._scaling_out = np.ctypeslib.as_array(self._info.scaling)[:levels]
+        self._x_out = np.ctypeslib.as_array(self._info.x)
+
+        def address(array: np.ndarray) -> ctypes.c_void_p:
+            return ctypes.c_void_p(array.ctypes.data)
+
+        info = ctypes.c_void_p(ctypes.addressof(self._info))
+        head = (self._ws, address(self._q), address(self._dq))
+        tail = (address(self._ref), address(self._tau), info)
+        self._args = (*head, address(self._tau_ext), *tail)
+        self._args_no_tau_ext = (*head, ctypes.c_void_p(None), *tail)  # NULL: zero external torque
 
     def _lib_fn(self, suffix: str):
         return getattr(self._lib, f"{self.name}_{suffix}")
@@ -79,7 +106,8 @@ class CompiledController:
         self._set_warm = self._lib_fn("set_warm_start")
         self._set_warm.argtypes, self._set_warm.restype = [ctypes.c_void_p, ctypes.c_int], None
         self._step = self._lib_fn("step")
-        self._step.argtypes = [ctypes.c_void_p, _DOUBLE_P, _DOUBLE_P, _DOUBLE_P, _DOUBLE_P, _DOUBLE_P, ctypes.c_void_p]
+        # Every argument is a pointer prepared once (see _prepare_buffers).
+        self._step.argtypes = [ctypes.c_void_p] * 7
         self._step.restype = ctypes.c_int
         self._lib_fn("workspace_size").restype = ctypes.c_size_t
         self._lib_fn("info_size").restype = ctypes.c_size_t
@@ -98,40 +126,71 @@ class CompiledController:
     def status_name(self, status: int) -> str:
         return self._status_name(status).decode()
 
-    def _inputs(self, q, dq, tau_ext, ref) -> tuple[np.ndarray, ...]:
-        q = np.ascontiguousarray(q, dtype=float).reshape(-1)
-        dq = np.ascontiguousarray(dq, dtype=float).reshape(-1)
-        tau_ext = self._zeros if tau_ext is None else np.ascontiguousarray(tau_ext, dtype=float).reshape(-1)
+    def _vector(self, value, name: str, size: int) -> np.ndarray:
+        value = np.asarray(value, dtype=float).reshape(-1)
+        if value.size != size:
+            raise ValueError(f"{name} must have {size} values, got {value.size}")
+        return value
+
+    def _call(self, q, dq, tau_ext, ref) -> int:
+        """Copy the inputs into the buffers and run the C step; returns the status."""
+        if not self._open:
+            raise RuntimeError("the controller was closed")
+        shape = self._shape
+        # Fast path: float arrays of the right shape are copied as they are.
+        if type(q) is np.ndarray and q.shape == shape:
+            self._q[...] = q
+        else:
+            self._q[...] = self._vector(q, "q", self.n)
+        if type(dq) is np.ndarray and dq.shape == shape:
+            self._dq[...] = dq
+        else:
+            self._dq[...] = self._vector(dq, "dq", self.n)
+        if tau_ext is None:
+            args = self._args_no_tau_ext
+        else:
+            args = self._args
+            if type(tau_ext) is np.ndarray and tau_ext.shape == shape:
+                self._tau_ext[...] = tau_ext
+            else:
+                self._tau_ext[...] = self._vector(tau_ext, "tau_ext", self.n)
         if ref is None:
             if self.ref_size:
                 raise ValueError(f"this controller takes a reference vector of {self.ref_size} values (see ref_layout)")
-            ref = self._empty_ref
+        elif type(ref) is np.ndarray and ref.shape == self._ref_shape:
+            self._ref_in[...] = ref
         else:
-            ref = np.ascontiguousarray(ref, dtype=float).reshape(-1)
+            ref = np.asarray(ref, dtype=float).reshape(-1)
             if ref.size != self.ref_size:
                 raise ValueError(f"ref must have {self.ref_size} values, got {ref.size}")
-            if not ref.size:
-                ref = self._empty_ref
-        for name, value in (("q", q), ("dq", dq), ("tau_ext", tau_ext)):
-            if value.size != self.n:
-                raise ValueError(f"{name} must have {self.n} values, got {value.size}")
-        return q, dq, tau_ext, ref
+            self._ref_in[...] = ref
+        return self._step(*args)
 
     def step(self, q, dq, tau_ext=None, ref=None) -> StepResult:
-        """One control step of the C code: τ, commanded q̈, scalings, status and the QP solution."""
-        if not self._open:
-            raise RuntimeError("the controller was closed")
-        q, dq, tau_ext, ref = self._inputs(q, dq, tau_ext, ref)
-        tau = np.empty(self.n)
-        status = self._step(self._ws, q.ctypes.data_as(_DOUBLE_P), dq.ctypes.data_as(_DOUBLE_P),
-                            tau_ext.ctypes.data_as(_DOUBLE_P), ref.ctypes.data_as(_DOUBLE_P),
-                            tau.ctypes.data_as(_DOUBLE_P), ctypes.byref(self._info))
-        info = self._info
-        levels = len(self.priorities)
-        ddq = np.array(info.ddq[: self.n])
-        scaling = np.array(info.scaling[:levels])
-        x = np.array(info.x[: info.nx]) if (status >= 0 or status == STATUS_INVALID_OUTPUT) else np.zeros(0)
-        return StepResult(tau, ddq, scaling, int(status), x)
+        """One control step of the C code: τ, commanded q̈, scalings, status and the QP solution.
+
+        The arrays of the result are new (later steps do not change them)."""
+        status = self._call(q, dq, tau_ext, ref)
+        x = self._x_out[: self._info.nx].copy() if (status >= 0 or status == STATUS_INVALID_OUTPUT) else np.zeros(0)
+        return StepResult(self._tau.copy(), self._ddq_out.copy(), self._scaling_out.copy(), int(status), x)
+
+    def step_into(self, q, dq, tau_ext, ref, tau: np.ndarray, ddq: np.ndarray | None = None,
+                  scaling: np.ndarray | None = None) -> int:
+        """`step` without allocating: writes τ, the commanded q̈ and the scalings into the given
+        float arrays (shapes (n,), (n,), (levels,); ddq and scaling may be None) and returns
+        the status. Same inputs, checks and values as `step`; `last_x()` gives the QP solution."""
+        status = self._call(q, dq, tau_ext, ref)
+        tau[...] = self._tau
+        if ddq is not None:
+            ddq[...] = self._ddq_out
+        if scaling is not None:
+            scaling[...] = self._scaling_out
+        return status
+
+    def last_x(self) -> np.ndarray:
+        """The QP solution of the last step, as `StepResult.x` (a copy)."""
+        status = self._info.status
+        return self._x_out[: self._info.nx].copy() if (status >= 0 or status == STATUS_INVALID_OUTPUT) else np.zeros(0)
 
     def last_info(self) -> dict:
         """Solver statistics of the last step: solves, DAQP iterations and exit flag."""

@@ -38,6 +38,7 @@ class RunOptions:
     runtime: str = "c"
     duration: float | None = None
     quiet: bool = False
+    cache: bool = True  # C runtime: reuse built bundles (False: build afresh, bypassing the cache)
 
 
 def simulate_command(file: Path, out: Path | None, options: RunOptions, formulation: str | None = None,
@@ -136,9 +137,11 @@ def _output_directory(out: Path | None, default: Path) -> Path:
 
 
 def _prepare(spec: Spec, options: RunOptions, formulation: str | None, stack: ExitStack) -> Simulation:
-    # The C bundle lives as long as the run that loads it.
+    if options.runtime == "c" and options.cache:
+        return prepare_simulation(spec, options.runtime, formulation, options.duration, cache=True)
+    # Without the cache, the C bundle lives as long as the run that loads it.
     work_dir = stack.enter_context(tempfile.TemporaryDirectory(prefix="dcts-runtime-"))
-    return prepare_simulation(spec, options.runtime, formulation, options.duration, work_dir)
+    return prepare_simulation(spec, options.runtime, formulation, options.duration, work_dir, cache=False)
 
 
 def _run(sim: Simulation, options: RunOptions, hooks: list[Hook]) -> RunResult:

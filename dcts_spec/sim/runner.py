@@ -6,6 +6,7 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import mujoco
 import numpy as np
@@ -22,6 +23,9 @@ from .references import WaypointFollower, initial_references
 from .runtime import Runtime, make_runtime
 from .scenario import Scenario, resolve_scenario
 from .sensing import TorqueSensor
+
+if TYPE_CHECKING:
+    from ..codegen import BundleCache
 
 
 @dataclass(frozen=True)
@@ -83,6 +87,8 @@ class Simulation:
         tau_true, tau_meas, refs, times = log.tau_ext_true, log.tau_ext_measured, log.ref, log.time
         scaling, status = log.scaling, log.status
         step, mj_step, ctrl = self.runtime.step, mujoco.mj_step, d.ctrl
+        # The C runtime writes its outputs straight into the log (no result objects per step).
+        step_into = getattr(self.runtime, "step_into", None)
         # MuJoCo resets the state on a huge acceleration and zeroes a huge or NaN control: either
         # makes the rest of the run meaningless.
         bad_qacc, bad_ctrl = d.warning[mujoco.mjtWarning.mjWARN_BADQACC], d.warning[mujoco.mjtWarning.mjWARN_BADCTRL]
@@ -102,11 +108,15 @@ class Simulation:
                 if follower is not None:
                     follower.update(times[k], q[k], ref)
                 refs[k] = ref
-                result = step(q[k], dq[k], tau_meas[k], ref)
-                ctrl[:] = tau[k] = result.tau
-                ddq_cmd[k] = result.ddq
-                scaling[k] = result.scaling
-                status[k] = result.status
+                if step_into is not None:
+                    status[k] = step_into(q[k], dq[k], tau_meas[k], ref, tau[k], ddq_cmd[k], scaling[k])
+                    ctrl[:] = tau[k]
+                else:
+                    result = step(q[k], dq[k], tau_meas[k], ref)
+                    ctrl[:] = tau[k] = result.tau
+                    ddq_cmd[k] = result.ddq
+                    scaling[k] = result.scaling
+                    status[k] = result.status
                 for s in range(substeps):
                     j = k * substeps + s
                     disturbances.apply(m, d, j)
@@ -135,8 +145,12 @@ class Simulation:
 
 
 def prepare_simulation(spec: Spec, runtime: str = "python", formulation: str | None = None,
-                       duration: float | None = None, work_dir: str | Path | None = None) -> Simulation:
+                       duration: float | None = None, work_dir: str | Path | None = None,
+                       cache: bool | BundleCache = True) -> Simulation:
     """Validate the spec, resolve its scenario, build the runtime and the MuJoCo model.
+
+    The C runtime comes from the bundle cache unless `cache` is False (then it is built in
+    `work_dir`); with model mismatch it is generated for the scaled model.
 
     Raises SpecError for a broken spec or a missing scenario, RuntimeUnavailable when the
     runtime cannot be built here.
@@ -146,5 +160,7 @@ def prepare_simulation(spec: Spec, runtime: str = "python", formulation: str | N
     if duration is not None:
         scenario = scenario.with_duration(duration)
     controller_robot = scaled_robot(report.robot, scenario.mass_scale)
-    rt = make_runtime(spec, runtime, formulation, robot=controller_robot, work_dir=work_dir)
+    changes = {"mass_scale": scenario.mass_scale} if scenario.mass_scale != 1.0 else None
+    rt = make_runtime(spec, runtime, formulation, robot=controller_robot, work_dir=work_dir, cache=cache,
+                      model_changes=changes)
     return Simulation(spec, report.robot, scenario, rt, controller_robot, runtime, formulation)

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Protocol
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
@@ -12,11 +12,19 @@ from ..robot.model import Robot
 from ..spec import Spec
 from ..tasks import ReferenceInput
 
+if TYPE_CHECKING:
+    from ..codegen import BundleCache
+
 RUNTIMES = ("c", "python")
 
 
 class Runtime(Protocol):
-    """What the simulation needs from a compiled controller."""
+    """What the simulation needs from a compiled controller.
+
+    A runtime may also have `step_into(q, dq, tau_ext, ref, tau, ddq, scaling) -> status`
+    (the C runtime does), which writes its outputs into the given arrays; the simulation then
+    uses it instead of `step`.
+    """
 
     @property
     def n(self) -> int: ...
@@ -32,7 +40,7 @@ class Runtime(Protocol):
 
 
 class RuntimeUnavailable(RuntimeError):
-    """The requested runtime cannot run this simulation here (no C compiler, model mismatch in C)."""
+    """The requested runtime cannot run this simulation here (e.g. no C compiler)."""
 
 
 def make_runtime(
@@ -41,37 +49,47 @@ def make_runtime(
     formulation: str | None = None,
     robot: Robot | None = None,
     work_dir: str | Path | None = None,
+    *,
+    cache: bool | BundleCache = True,
+    model_changes: dict | None = None,
 ) -> Runtime:
     """The spec's controller as a runtime.
 
     Args:
         spec: A validated spec.
         kind: "python" (CasADi function and QP solver called from Python) or "c" (the
-            generated C bundle, built in `work_dir`).
+            generated C bundle).
         formulation: Overrides `controller.formulation`.
         robot: The controller's model; default: the spec's robot. A different robot (e.g.
-            with scaled masses) is how model mismatch is simulated.
-        work_dir: Where the C bundle is generated and built (kind "c" only).
+            with scaled masses, `sim.mismatch.scaled_robot`) is how model mismatch is
+            simulated; the C bundle is then generated for that model.
+        work_dir: Where the C bundle is generated and built when the cache is not used.
+        cache: C only. True (default): load the bundle from the bundle cache
+            (`codegen.BundleCache`: `$DCTS_CACHE_DIR` or ~/.cache/dcts/bundles), building it
+            there when it is missing; a BundleCache: that cache; False: build a fresh bundle in
+            `work_dir`.
+        model_changes: How `robot` differs from the spec's (e.g. {"mass_scale": 1.2}); recorded
+            in the C bundle's manifest and header.
     """
     if kind not in RUNTIMES:
         raise ValueError(f"unknown runtime {kind!r}; choose one of {', '.join(RUNTIMES)}")
     if kind == "python":
         return Controller(spec, robot or _spec_robot(spec), formulation)
-    return _c_runtime(spec, formulation, robot, work_dir)
+    return _c_runtime(spec, formulation, robot, work_dir, cache, model_changes)
 
 
-def _c_runtime(spec: Spec, formulation: str | None, robot: Robot | None, work_dir: str | Path | None) -> Runtime:
-    from ..codegen import CodegenError, compile_c  # here: the Python runtime does not need it
+def _c_runtime(spec: Spec, formulation: str | None, robot: Robot | None, work_dir: str | Path | None,
+               cache: bool | BundleCache, model_changes: dict | None) -> Runtime:
+    from ..codegen import BundleCache, CodegenError, compile_c  # here: the Python runtime does not need them
 
-    if robot is not None and robot.model != _spec_robot(spec).model:
-        raise RuntimeUnavailable(
-            "the C code generator compiles the spec's own robot, so it cannot simulate model_mismatch; "
-            "run with --runtime python"
-        )
-    if work_dir is None:
-        raise ValueError("the C runtime needs a work_dir to generate and build the bundle in")
+    if not cache and work_dir is None:
+        raise ValueError("the C runtime needs a work_dir to generate and build the bundle in (or the cache)")
     try:
-        return compile_c(spec, Path(work_dir) / "bundle", formulation=formulation)
+        if not cache:
+            return compile_c(spec, Path(work_dir) / "bundle", formulation=formulation, robot=robot,
+                             model_changes=model_changes)
+        bundles = cache if isinstance(cache, BundleCache) else BundleCache()
+        return bundles.load(spec, formulation, robot=robot, model_changes=model_changes)
     except CodegenError as error:
         raise RuntimeUnavailable(f"cannot build the C runtime: {error}; run with --runtime python") from error
 
