@@ -50,7 +50,7 @@ class StepResult:
     ddq: np.ndarray  # commanded joint acceleration M⁻¹(τ − ν − g); the actual one adds M⁻¹τ_ext
     scaling: np.ndarray  # one task scaling factor per priority level, highest first, in [0, 1] (1 = not scaled)
     status: int  # STATUS_* code; negative means the fallback torque was applied
-    x: np.ndarray  # the QP solution (empty for closed forms)
+    x: np.ndarray  # the QP solution, in scaled variables (empty for closed forms)
 
     @property
     def ok(self) -> bool:
@@ -58,18 +58,29 @@ class StepResult:
 
 
 def data_function(problem: ControlProblem, law: ControlLaw, name: str = "qp_data") -> ca.Function:
-    """The CasADi function that maps the controller inputs to the QP data and output maps."""
+    """The CasADi function that maps the controller inputs to the QP data and output maps.
+
+    The QP variables are scaled so that the Hessian has a unit diagonal, x = D x̃ with
+    D = diag(H)^(-1/2): the same problem, but priority weights spanning 1e3…1e9 no longer make
+    its condition number explode, which some DAQP versions (and qpOASES) cannot stand.
+    """
     nx = law.nx
     qp = law.qp
+    torque_matrix, scaling_matrix = law.torque.matrix, law.scaling.matrix
     if qp is None:
         empty = ca.SX(0, 1)
         H, f, A, lba, uba, lbx, ubx = ca.SX(0, 0), empty, ca.SX(0, 0), empty, empty, empty, empty
     else:
-        H, f, A, lba, uba, lbx, ubx = qp.hessian, qp.gradient, qp.constraints, qp.lba, qp.uba, qp.lbx, qp.ubx
+        d = 1.0 / ca.sqrt(ca.diag(qp.hessian))
+        D = ca.diag(d)
+        H = ca.mtimes([D, qp.hessian, D])
+        f, A, lbx, ubx = d * qp.gradient, ca.mtimes(qp.constraints, D), qp.lbx / d, qp.ubx / d
+        lba, uba = qp.lba, qp.uba
+        torque_matrix, scaling_matrix = ca.mtimes(torque_matrix, D), ca.mtimes(scaling_matrix, D)
     torque = law.torque
     ddq0 = problem.commanded_acceleration(torque.offset)
-    Q = ca.mtimes(problem.mass_matrix_inverse, torque.matrix) if nx else ca.SX(problem.n, 0)
-    outputs = [H, f, A, lba, uba, lbx, ubx, torque.offset, torque.matrix, ddq0, Q, law.scaling.offset, law.scaling.matrix]
+    Q = ca.mtimes(problem.mass_matrix_inverse, torque_matrix) if nx else ca.SX(problem.n, 0)
+    outputs = [H, f, A, lba, uba, lbx, ubx, torque.offset, torque_matrix, ddq0, Q, law.scaling.offset, scaling_matrix]
     inputs = [problem.q, problem.dq, problem.tau_ext, problem.ref]
     return ca.Function(
         name,
