@@ -32,7 +32,7 @@ STATUS_NAMES = {
     STATUS_SOLVER_FAILED: "solver failed",
     STATUS_INVALID_OUTPUT: "invalid output",
 }
-TORQUE_TOLERANCE = 1e-6  # Nm, relative to max(1, τ_max): what solver tolerances may leave
+TORQUE_TOLERANCE = 1e-5  # relative to max(1, τ_max): what solver tolerances may leave (then clipped)
 # With the limits relaxed the QP data holds huge bounds (a velocity excess asks for ~1e3 rad/s² in
 # one period), and the solver's tolerance, relative to them, leaves a larger overshoot to clip.
 RELAXED_TORQUE_TOLERANCE = 1e-3
