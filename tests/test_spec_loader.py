@@ -219,7 +219,7 @@ def test_scenario_defaults_and_short_forms() -> None:
     spec = load_spec_text(SPEC + "scenario: {duration: 2, external_torque: noisy}\n")
     sc = spec.scenario
     assert sc is not None
-    assert (sc.unit, sc.substeps, sc.integrator, sc.initial_q) == ("rad", 1, "implicitfast", None)
+    assert (sc.unit, sc.substeps, sc.integrator, sc.initial_q) == ("rad", 1, "rk4", None)
     assert sc.disturbances == [] and sc.payloads == [] and sc.waypoints is None
     assert sc.sensing.mode == "noisy" and sc.sensing.noise_std == 0.0 and sc.sensing.seed == 0
     spec = load_spec_text(SPEC + "scenario: {duration: 2, external_torque: {mode: noisy, noise_std: 0.5}}\n")

@@ -8,9 +8,12 @@ over one control period dt, with the acceleration a held constant,
   - velocity: |ẋ + dt a| ≤ v_max;
   - viability: from the next state the coordinate can still stop before its position bound
     braking at `braking` (x⁺ + ẋ⁺²/(2 braking) ≤ x_max), a quadratic inequality in a.
-The bounds are then clipped to ±`accel_limit`. When the state is already beyond what the
-bounds can recover (lower > upper), both become their midpoint so the QP stays feasible and
-the coordinate brakes as hard as allowed.
+In a state that is no longer viable (too close to the bound for its speed, after a disturbance),
+the apex term would ask for an unbounded deceleration; it is limited to stopping within the step
+and heading back at the braking acceleration, so the joint stops at its bound instead of
+bouncing off it. Beyond the bound, the end-of-step term brings it back. The bounds are then
+clipped to ±`accel_limit`. Should lower and upper still cross, both become their midpoint so the
+QP stays feasible.
 """
 
 from __future__ import annotations
@@ -23,14 +26,17 @@ _TINY = 1e-12
 _HUGE = 1e6
 
 
-def _upper_from_position(x, v, x_max, dt):
+def _upper_from_position(x, v, x_max, braking, dt):
     """Largest a keeping x ≤ x_max during the step, apex of the parabola included."""
     end_of_step = 2.0 * (x_max - x - dt * v) / dt**2
     stop = -v / dt
     # Moving toward x_max (v > 0) and braking: the maximum is at t* = −v/a; inside the step
-    # (a < −v/dt) it is x − v²/(2a), which must stay ≤ x_max. Already beyond x_max (a slight
-    # overshoot from integration) there is no apex to keep inside: the end of the step decides.
-    apex = -(v**2) / (2.0 * ca.fmax(x_max - x, _TINY))
+    # (a < −v/dt) it is x − v²/(2a), which must stay ≤ x_max. Too close for its speed (a state
+    # that is no longer viable, after a disturbance or from the integration) this asks for
+    # ~v²/(2·gap) → ∞: ask instead to stop within the step and head back at the braking
+    # acceleration, so the coordinate stops at its bound rather than bouncing off it. Already
+    # beyond x_max there is no apex to keep inside: the end of the step brings it back.
+    apex = ca.fmax(-(v**2) / (2.0 * ca.fmax(x_max - x, _TINY)), stop - braking)
     inside_apex = ca.logic_and(ca.logic_and(v > 0, end_of_step < stop), x < x_max)
     return ca.if_else(inside_apex, apex, end_of_step)
 
@@ -49,7 +55,7 @@ def _upper_from_viability(x, v, x_max, braking, dt):
 
 
 def _upper(x, v, x_max, braking, dt):
-    return ca.fmin(_upper_from_position(x, v, x_max, dt), _upper_from_viability(x, v, x_max, braking, dt))
+    return ca.fmin(_upper_from_position(x, v, x_max, braking, dt), _upper_from_viability(x, v, x_max, braking, dt))
 
 
 def acceleration_bounds(x, v, x_min, x_max, v_max, accel_limit, braking, dt):

@@ -78,7 +78,11 @@ class ScenarioSpec(StrictModel):
     external_torque: ExternalTorqueSensing | Literal["ideal", "ignored", "noisy"] = "ideal"
     model_mismatch: ModelMismatch | None = None
     substeps: Integer = Field(1, ge=1, description="simulation steps per control period (the step is period/substeps)")
-    integrator: Literal["euler", "implicitfast", "implicit", "rk4"] = "implicitfast"
+    integrator: Literal["euler", "implicitfast", "implicit", "rk4"] = Field(
+        "rk4",
+        description="MuJoCo integrator; rk4 integrates the torque held over the period as a real robot "
+        "does (the limits are shaped for x + T v + ½T²a), the Euler-type ones move x by T²a",
+    )
 
     @property
     def sensing(self) -> ExternalTorqueSensing:
