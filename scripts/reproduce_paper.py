@@ -131,9 +131,9 @@ SENSITIVITY: dict[str, dict[str, Any]] = {
         "short": {"duration": 2.5, "points": 3},
     },
     "exp3_default_weight": {
-        "title": "Experiment 3, DCTS with dcts' default scaling weight (1e3) instead of 1e8",
-        "runs": [Run("dcts_w1e3", "exp3_octagon.yaml", "dcts", ((("controller", "priority_weights"), DELETE),)),
-                 Run("dcts_w1e3_vsat_0.85", "exp3_octagon.yaml", "dcts",
+        "title": "Experiment 3, DCTS with dcts' default scaling weight (1e6) instead of 1e8",
+        "runs": [Run("dcts_default_w", "exp3_octagon.yaml", "dcts", ((("controller", "priority_weights"), DELETE),)),
+                 Run("dcts_default_w_vsat_0.85", "exp3_octagon.yaml", "dcts",
                      ((("controller", "priority_weights"), DELETE),) + _vsat(0.85))],
     },
     "exp4_semi_implicit": {

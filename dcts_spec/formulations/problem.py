@@ -17,7 +17,7 @@ from ..symbolic import SymbolicRobot
 from ..symbolic.linalg import spd_inverse
 from ..tasks import ReferenceInput, Task, make_task
 
-DEFAULT_WEIGHT_LOWEST = 1e3  # lowest priority level: still far above the acceleration energy
+DEFAULT_WEIGHT_LOWEST = 1e6  # lowest priority level: w ≫ the acceleration energy of null-space motion
 DEFAULT_WEIGHT_RATIO = 1e3  # each level above weighs this much more
 
 
