@@ -570,20 +570,6 @@ def test_infeasible_limits_are_relaxed(robot, formulation):
     dq = np.zeros(7)
     dq[3] = 3.0 * c.robot.limits.v_max[3]
     r = c.step(q0, dq, np.zeros(7))
-    assert np.all(np.isfinite(r.tau)) and _in_limits(c, r.tau)  # holds today, fallback or not
+    assert np.all(np.isfinite(r.tau)) and _in_limits(c, r.tau)
     assert r.status == STATUS_LIMITS_RELAXED, r.status
 
-
-@pytest.mark.parametrize("robot", ROBOTS)
-@pytest.mark.parametrize("formulation", QP_FORMULATIONS)
-def test_infeasible_limits_keep_torque_within_limits(robot, formulation):
-    """What holds today in the infeasible state above: a finite τ within the limits (via the fallback)."""
-    q0 = HOME[robot]
-    tau_max = np.ceil(np.abs(_gravity(robot, q0))) + 2.0
-    key = ("text", spec_text(robot, case_tasks("e", robot), f"  joint_torque: {{max: {_fmt(tau_max)}}}\n", name="infeasible"))
-    c = controller(key, formulation)
-    dq = np.zeros(7)
-    dq[3] = 3.0 * c.robot.limits.v_max[3]
-    r = c.step(q0, dq, np.zeros(7))
-    assert r.status != STATUS_OK
-    assert np.all(np.isfinite(r.tau)) and _in_limits(c, r.tau)
