@@ -1,0 +1,102 @@
+"""Tasks: run-time references, feed-forward, the saturated law — checked through OSC, whose top task
+is met exactly, against Pinocchio's numeric kinematics."""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from dcts_spec import build_controller
+from dcts_spec.robot.builtin import load_builtin_model
+from dcts_spec.spec import load_spec_text
+
+Q = np.array([0.1, 0.6, -0.2, -1.2, 0.3, 1.0, 0.2])
+DQ = np.array([0.2, -0.1, 0.3, 0.1, -0.2, 0.4, 0.1])
+TARGET = np.array([0.5, 0.1, 0.55])
+RPY = np.array([3.0, 0.2, -0.5])
+
+
+def spec(task: str) -> str:
+    return f"""version: 1
+name: tasks
+robot: {{model: iiwa14}}
+limits: {{joint_torque: {{max: 1000, allow_outside_urdf: true}}}}
+controller: {{formulation: osc}}
+tasks:
+  - {task}
+  - {{name: rest, type: joint, priority: 2, gains: {{kp: 0, kd: 3}}}}
+"""
+
+
+def controller(task: str):
+    return build_controller(load_spec_text(spec(task)))
+
+
+def tool_state(q: np.ndarray, dq: np.ndarray):
+    """Pinocchio's tool placement, world-aligned Jacobian and J̇q̇."""
+    model = load_builtin_model("iiwa14")
+    data = model.createData()
+    pin.forwardKinematics(model, data, q, dq, np.zeros(model.nv))
+    pin.computeJointJacobians(model, data, q)
+    pin.updateFramePlacements(model, data)
+    fid = model.getFrameId("tool")
+    J = pin.getFrameJacobian(model, data, fid, pin.LOCAL_WORLD_ALIGNED)
+    bias = pin.getFrameClassicalAcceleration(model, data, fid, pin.LOCAL_WORLD_ALIGNED).vector
+    return data.oMf[fid], J, bias
+
+
+def tool_acceleration(result, q, dq) -> np.ndarray:
+    """The tool's actual 6-D acceleration J a + J̇q̇ (no τ_ext here: a = commanded q̈)."""
+    _, J, bias = tool_state(q, dq)
+    return J @ result.ddq + bias
+
+
+def test_run_time_references_equal_constant_ones():
+    constant = controller(f"{{name: reach, type: pose, frame: tool, priority: 1, gains: {{kp: 50, kd: 14}}, "
+                          f"reference: {{position: {TARGET.tolist()}, rpy: {RPY.tolist()}}}}}")
+    runtime = controller("{name: reach, type: pose, frame: tool, priority: 1, gains: {kp: 50, kd: 14}, reference: {input: true}}")
+    layout = [(r.task, r.field, r.offset, r.size) for r in runtime.ref_layout]
+    assert layout == [("reach", "position", 0, 3), ("reach", "rpy", 3, 3)]
+    a = constant.step(Q, DQ)
+    b = runtime.step(Q, DQ, ref=np.concatenate([TARGET, RPY]))
+    np.testing.assert_allclose(a.tau, b.tau, rtol=1e-12, atol=1e-10)
+    with pytest.raises(ValueError, match="reference vector of 6"):
+        runtime.step(Q, DQ)
+
+
+def test_feedforward_enters_the_desired_acceleration():
+    c = controller("{name: reach, type: position, frame: tool, priority: 1, gains: {kp: 50, kd: 14}, "
+                   "reference: {input: true, feedforward: true}}")
+    assert [r.field for r in c.ref_layout] == ["position", "velocity", "acceleration"]
+    v_ff, a_ff = np.array([0.1, -0.2, 0.05]), np.array([1.0, 0.5, -2.0])
+    result = c.step(Q, DQ, ref=np.concatenate([TARGET, v_ff, a_ff]))
+    placement, J, _ = tool_state(Q, DQ)
+    desired = a_ff + 50 * (TARGET - placement.translation) + 14 * (v_ff - J[:3] @ DQ)
+    np.testing.assert_allclose(tool_acceleration(result, Q, DQ)[:3], desired, rtol=1e-8, atol=1e-8)
+
+
+def test_orientation_error_is_the_world_rotation_vector_on_the_chosen_axes():
+    c = controller(f"{{name: point, type: orientation, frame: tool, axes: [ry, rx], priority: 1, "
+                   f"gains: {{kp: [30, 60], kd: [8, 12]}}, reference: {{rpy: {RPY.tolist()}}}}}")
+    result = c.step(Q, DQ)
+    placement, J, _ = tool_state(Q, DQ)
+    error = pin.log3(pin.rpy.rpyToMatrix(*RPY) @ placement.rotation.T)
+    omega = J[3:] @ DQ
+    desired = np.array([30 * error[1] - 8 * omega[1], 60 * error[0] - 12 * omega[0]])  # rows in the order written
+    np.testing.assert_allclose(tool_acceleration(result, Q, DQ)[[4, 3]], desired, rtol=1e-8, atol=1e-8)
+
+
+@pytest.mark.parametrize("distance", [0.01, 0.3])
+def test_saturated_law_limits_the_desired_velocity(distance: float):
+    """ẍ_d = −kd(ẋ − v ẋ_d), ẋ_d = (kp/kd)Δx, v = min(1, v_sat/‖ẋ_d‖) (experiment 3's law)."""
+    placement, J, _ = tool_state(Q, DQ)
+    target = placement.translation + distance * np.array([0.0, 0.6, 0.8])
+    c = controller(f"{{name: reach, type: position, frame: tool, priority: 1, gains: {{kp: 400, kd: 40, max_velocity: 0.4}}, "
+                   f"reference: {{position: {target.tolist()}}}}}")
+    result = c.step(Q, DQ)
+    desired_velocity = 400 / 40 * (target - placement.translation)
+    v = min(1.0, 0.4 / np.linalg.norm(desired_velocity))
+    assert (v < 1.0) == (distance == 0.3)
+    desired = -40 * (J[:3] @ DQ - v * desired_velocity)
+    np.testing.assert_allclose(tool_acceleration(result, Q, DQ)[:3], desired, rtol=1e-8, atol=1e-8)
