@@ -179,9 +179,10 @@ class Controller:
 
     def evaluate_data(self, q, dq, tau_ext=None, ref=None) -> dict[str, np.ndarray]:
         """The QP data and output maps at a state (for tests and tools)."""
-        q, dq, tau_ext, ref = self._inputs(q, dq, tau_ext, ref)
-        values = self.data(q, dq, tau_ext, ref)
-        return {name: np.array(v) for name, v in zip(DATA_OUTPUTS, values)}
+        return self._evaluate(*self._inputs(q, dq, tau_ext, ref))
+
+    def _evaluate(self, q: np.ndarray, dq: np.ndarray, tau_ext: np.ndarray, ref: np.ndarray) -> dict[str, np.ndarray]:
+        return {name: np.array(v) for name, v in zip(DATA_OUTPUTS, self.data(q, dq, tau_ext, ref))}
 
     def _inputs(self, q, dq, tau_ext, ref) -> tuple[np.ndarray, ...]:
         q = np.asarray(q, dtype=float).reshape(-1)
@@ -197,26 +198,28 @@ class Controller:
                 raise ValueError(f"{name} must have {size} values, got {value.size}")
         return q, dq, tau_ext, ref
 
+    def _fallback(self, q: np.ndarray, dq: np.ndarray, status: int, x: np.ndarray) -> StepResult:
+        return StepResult(self.fallback_torque(q, dq), np.zeros(self.n), np.zeros(len(self.problem.levels)), status, x)
+
     def step(self, q, dq, tau_ext=None, ref=None) -> StepResult:
         """One control step: τ, commanded q̈, scalings and a status code."""
         q, dq, tau_ext, ref = self._inputs(q, dq, tau_ext, ref)
-        levels = len(self.problem.levels)
         if not all(np.all(np.isfinite(v)) for v in (q, dq, tau_ext, ref)):
-            return StepResult(self.fallback_torque(q, dq), np.zeros(self.n), np.zeros(levels), STATUS_NONFINITE_INPUT, np.zeros(0))
-        data = {name: np.array(v) for name, v in zip(DATA_OUTPUTS, self.data(q, dq, tau_ext, ref))}
+            return self._fallback(q, dq, STATUS_NONFINITE_INPUT, np.zeros(0))
+        data = self._evaluate(q, dq, tau_ext, ref)
         status = STATUS_OK
         x = np.zeros(0)
         if self.nx:
             solution, status = self._solve(data)
             if solution is None:
-                return StepResult(self.fallback_torque(q, dq), np.zeros(self.n), np.zeros(levels), status, np.zeros(0))
+                return self._fallback(q, dq, status, np.zeros(0))
             x = solution
         tau = data["tau0"].ravel() + data["T"] @ x
         relative = RELAXED_TORQUE_TOLERANCE if status == STATUS_LIMITS_RELAXED else TORQUE_TOLERANCE
         tolerance = relative * np.maximum(1.0, np.where(np.isfinite(self.tau_max), self.tau_max, 1.0))
         out_of_limits = self.law.enforces_torque_limits and np.any(np.abs(tau) > self.tau_max + tolerance)
         if not np.all(np.isfinite(tau)) or out_of_limits:
-            return StepResult(self.fallback_torque(q, dq), np.zeros(self.n), np.zeros(levels), STATUS_INVALID_OUTPUT, x)
+            return self._fallback(q, dq, STATUS_INVALID_OUTPUT, x)
         self._last_gravity = np.array(self.gravity_function(q)).ravel()
         ddq = data["ddq0"].ravel() + data["Q"] @ x
         scaling = np.clip(data["s0"].ravel() + data["S"] @ x, 0.0, 1.0)

@@ -49,6 +49,11 @@ class ValidationReport:
     def file(self) -> str:
         return self.spec.source.file
 
+    @property
+    def gravity_torque_ratio(self) -> float:
+        """Largest share of a joint's torque limit that holding the initial configuration takes."""
+        return float(np.max(np.abs(self.gravity_torque) / self.robot.limits.tau_max))
+
     def to_dict(self) -> dict:
         lim = self.robot.limits
 
@@ -73,7 +78,7 @@ class ValidationReport:
                 "cartesian": [{"frame": b.frame, "axis": "xyz"[b.axis], "min": b.c_min if np.isfinite(b.c_min) else None,
                                "max": b.c_max if np.isfinite(b.c_max) else None} for b in self.robot.cartesian_bounds],
             },
-            "gravity_torque_ratio": float(np.max(np.abs(self.gravity_torque) / lim.tau_max)),
+            "gravity_torque_ratio": self.gravity_torque_ratio,
             "diagnostics": [d.to_dict() for d in self.diagnostics],
         }
 
@@ -100,8 +105,7 @@ class ValidationReport:
             lines.append(f"              |q̈| ≤ {fmt(lim.a_max, deg)} deg/s²")
         for b in robot.cartesian_bounds:
             lines.append(f"              {b.c_min:.4g} ≤ {b.frame}.{'xyz'[b.axis]} ≤ {b.c_max:.4g} m")
-        ratio = np.abs(self.gravity_torque) / lim.tau_max
-        lines.append(f"  gravity     needs {np.max(ratio) * 100:.0f}% of the torque limit at the initial configuration")
+        lines.append(f"  gravity     needs {self.gravity_torque_ratio * 100:.0f}% of the torque limit at the initial configuration")
         lines.extend(f"  {d}" for d in self.diagnostics)
         return "\n".join(lines)
 
@@ -215,7 +219,7 @@ def _check_scenario(spec: Spec, robot: Robot) -> list[Diagnostic]:
         size = size_of(getattr(sensing, name))
         if size is not None and size != n:
             diags.append(src.diagnostic(at + ("external_torque", name), f"{size} values for {n} joints"))
-    if (wp := sc.waypoints) is not None:
+    if sc.waypoints is not None:
         diags += _check_waypoints(spec, robot)
     return diags
 
@@ -253,9 +257,11 @@ def _levels(spec: Spec, robot: Robot, q: np.ndarray) -> tuple[list[LevelReport],
             J = _numeric_jacobian(task, model, data)
             entries.append((task.name, task_spec.type, task.dim))
             rows.append(J)
-            if np.linalg.matrix_rank(J, RANK_TOLERANCE) < task.dim:
+            rank = np.linalg.matrix_rank(J, RANK_TOLERANCE)
+            if rank < task.dim:
                 i = spec.tasks.index(task_spec)
-                diags.append(spec.source.diagnostic(("tasks", i), f"task {task.name!r} is singular at the initial configuration (rank {np.linalg.matrix_rank(J, RANK_TOLERANCE)} < {task.dim})", "warning"))
+                message = f"task {task.name!r} is singular at the initial configuration (rank {rank} < {task.dim})"
+                diags.append(spec.source.diagnostic(("tasks", i), message, "warning"))
         J_level = np.vstack(rows)
         # Plain ints: numpy's would not survive `--json` (json.dumps rejects numpy.int64).
         before = int(np.linalg.matrix_rank(stacked, RANK_TOLERANCE)) if stacked.size else 0

@@ -131,16 +131,6 @@ def numeric_tasks(spec: Spec, joint_names: list[str]) -> list[NumericTask]:
 # -- numeric dynamics and checks -------------------------------------------------------------------
 
 
-def dynamics(model: pin.Model, q: np.ndarray, dq: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """M, ν (Coriolis/centrifugal) and g from Pinocchio."""
-    data = model.createData()
-    M = pin.crba(model, data, q)
-    M = np.triu(M) + np.triu(M, 1).T
-    g = pin.computeGeneralizedGravity(model, data, q)
-    nu = pin.rnea(model, data, q, dq, np.zeros(model.nv)) - g
-    return M, nu, g
-
-
 def actual_acceleration(model: pin.Model, q, dq, tau, tau_ext) -> np.ndarray:
     """Forward dynamics: a = M⁻¹(τ + τ_ext − ν − g), from Pinocchio (ABA)."""
     return pin.aba(model, model.createData(), q, dq, tau + tau_ext)

@@ -51,6 +51,16 @@ def task_terms(model: pin.Model, data: pin.Data, task: NumericTask, q: np.ndarra
     return J, bias, target
 
 
+def dynamics(model: pin.Model, q: np.ndarray, dq: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """M, ν (Coriolis/centrifugal) and g from Pinocchio."""
+    data = model.createData()
+    M = pin.crba(model, data, q)
+    M = np.triu(M) + np.triu(M, 1).T  # crba fills the upper triangle only
+    g = pin.computeGeneralizedGravity(model, data, q)
+    nu = pin.rnea(model, data, q, dq, np.zeros(model.nv)) - g
+    return M, nu, g
+
+
 def closed_form_hierarchy(model: pin.Model, tasks: list[NumericTask], q, dq, tau_ext=None):
     """τ of the recursive dynamically consistent hierarchy (restricted Jacobians, pseudo-inverses).
 
@@ -62,12 +72,8 @@ def closed_form_hierarchy(model: pin.Model, tasks: list[NumericTask], q, dq, tau
     pin.forwardKinematics(model, data, q, dq, np.zeros(n))
     pin.computeJointJacobians(model, data, q)
     pin.updateFramePlacements(model, data)
-    M = pin.crba(model, data, q)
-    M = np.triu(M) + np.triu(M, 1).T
+    M, nu, g = dynamics(model, q, dq)
     Minv = np.linalg.inv(M)
-    nle = pin.rnea(model, data, q, dq, np.zeros(n))
-    g = pin.computeGeneralizedGravity(model, data, q)
-    nu = nle - g
     levels = []
     for p in sorted({t.priority for t in tasks}):
         terms = [task_terms(model, data, t, q, dq) for t in tasks if t.priority == p]

@@ -7,19 +7,20 @@ contain TEXT (case-insensitive).
 
 from __future__ import annotations
 
+import functools
 import json
 import re
-import subprocess
-import sys
 from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
 
+import command_line
+from command_line import ROOT
 from dcts_spec.spec import SpecError
 from dcts_spec.validate import validate_file
 
-ROOT = Path(__file__).resolve().parents[1]
+dcts = functools.partial(command_line.dcts, timeout=120)
 CORPUS = ROOT / "tests" / "broken_specs"
 EXPECT = re.compile(r"#\s*expect:\s*(\d+):\s*(.+?)\s*$")
 
@@ -49,13 +50,6 @@ def _errors(path: Path) -> list:
     with pytest.raises(SpecError) as caught:
         validate_file(path)
     return caught.value.errors
-
-
-def dcts(*args: str) -> subprocess.CompletedProcess:
-    """Run the `dcts` command line of this environment."""
-    script = Path(sys.executable).with_name("dcts")
-    command = [str(script)] if script.is_file() else [sys.executable, "-c", "from dcts_spec.cli import main; main()"]
-    return subprocess.run([*command, *args], cwd=ROOT, capture_output=True, text=True, timeout=120)
 
 
 def test_corpus_is_large_enough() -> None:

@@ -35,7 +35,6 @@ from formulation_cases import (
     case_spec,
     case_tasks,
     check_bounds,
-    dynamics,
     level_residuals,
     null_space_dimension,
     numeric_tasks,
@@ -45,6 +44,7 @@ from formulation_cases import (
     span_residual,
     spec_text,
 )
+from reference import dynamics
 
 ROBOTS = ("iiwa14", "panda")
 CASES = ("a", "b", "c", "d", "e")
@@ -59,9 +59,6 @@ P2_TOL = 1e-6  # τ and a against the closed form, relative to max(1, |·|)
 P3_TOL = 1e-8  # relative residual of τ − g off span(Jᵀ)
 BOUND_TOL = 1e-6
 SOLVER_TOL = 1e-6
-# The singularity damping λ² of (J M⁻¹ Jᵀ + λ² I)⁻¹ (formulations/hierarchy.py): it may cost a level
-# λ²/σ_min(J M⁻¹ Jᵀ) of its own target, relative; P1 allows that on top of P1_TOL (it only matters
-# near singular configurations).
 
 
 # -- controllers, built once -----------------------------------------------------------------------
@@ -120,12 +117,12 @@ def no_bound_active_states(c: Controller, states: list[State]):
     return out
 
 
-def top_task_error(levels, a: np.ndarray) -> tuple[float, float]:
-    """(residual of level 1 relative to the scale, the scale max(1, |ẍ_d|, |J a|, |J̇q̇|))."""
+def top_task_error(levels, a: np.ndarray) -> float:
+    """Residual of level 1 relative to max(1, |ẍ_d|, |J a|, |J̇q̇|)."""
     J, bias, target = levels[0]
     residual = J @ a + bias - target
     scale = max(1.0, np.abs(target).max(), np.abs(J @ a).max(), np.abs(bias).max())
-    return float(np.abs(residual).max() / scale), scale
+    return float(np.abs(residual).max() / scale)
 
 
 # -- P1: the top task is met exactly when feasible -------------------------------------------------
@@ -141,13 +138,10 @@ def _p1_worst(formulation: str) -> tuple[float, tuple]:
             tasks = tasks_of(key, c)
             for st, r, a in no_bound_active_states(c, states_of(robot, case)):
                 _, _, levels = reference_solution(c.robot.model, tasks, st)
-                error, _ = top_task_error(levels, a)
+                error = top_task_error(levels, a)
                 if error - P1_TOL > worst:
                     worst, where = error - P1_TOL, (robot, case, st, error, P1_TOL)
     return worst, where
-
-
-
 
 
 @pytest.mark.parametrize("formulation", ["dcts", "osc", "projector"])
@@ -176,9 +170,6 @@ def test_p2_dcts_equals_osc_and_closed_form(robot, case):
         errors = [relative(r.tau, tau_ref), relative(a, a_ref), relative(r.tau, r_osc.tau), relative(a, a_osc)]
         worst = max(worst, *errors)
     assert worst < P2_TOL, worst
-
-
-
 
 
 @pytest.mark.parametrize("robot", ROBOTS)
@@ -464,8 +455,9 @@ def test_p5_external_torque_changes_the_torque(robot):
 def test_p5_joint_bounds_hold_on_actual_acceleration(robot, mode):
     """Joint 4 0.05 rad below its upper limit, moving toward it at the speed where its viability bound
     asks for a deceleration of 20 rad/s², and pushed toward it by τ_ext = 40 Nm (without compensation
-    that joint accelerates at +40 rad/s² (iiwa14) / +270 rad/s² (panda)); the task only holds the tool. measured: the bound holds on the actual acceleration
-    q̈ + M⁻¹τ_ext. ignored: the controller bounds q̈ alone, so the actual acceleration breaks it."""
+    that joint accelerates at +40 rad/s² (iiwa14) / +270 rad/s² (panda)); the task only holds the tool.
+    measured: the bound holds on the actual acceleration q̈ + M⁻¹τ_ext. ignored: the controller bounds
+    q̈ alone, so the actual acceleration breaks it."""
     robot_model = load_builtin_model(robot)
     q0 = HOME[robot].copy()
     q0[3] = robot_model.upperPositionLimit[3] - 0.05
@@ -491,9 +483,6 @@ def test_p5_joint_bounds_hold_on_actual_acceleration(robot, mode):
 
 
 # -- DAQP against qpOASES --------------------------------------------------------------------------
-
-
-
 
 
 def _solver_pairs(robot: str) -> list[tuple[tuple, State]]:
@@ -532,12 +521,10 @@ def test_random_states_give_finite_torques_within_limits(robot, formulation):
     key = ("text", spec_text(robot, case_tasks("a", robot), ROBUST_LIMITS, name="robust"))
     c = controller(key, formulation)
     states = random_states(c.robot.model, 200, 4242 + ROBOTS.index(robot), margin=0.05)
-    statuses = []
     for st in states:
         r, a = run(c, st)
         assert np.all(np.isfinite(r.tau)) and _in_limits(c, r.tau), (st, r)
         assert r.status >= 0, (r.status, st)
-        statuses.append(r.status)
         if formulation in QP_FORMULATIONS and r.status == STATUS_OK:
             bounds = check_bounds(c.robot, st.q, st.dq, r.tau, a, DT)
             assert bounds.violation() < BOUND_TOL, (st, bounds)

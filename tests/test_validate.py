@@ -4,23 +4,15 @@ from __future__ import annotations
 
 import json
 import math
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
 
+from command_line import ROOT, dcts
+from dcts_spec.robot.builtin import example_robot_data_dir, iiwa14_urdf_path
 from dcts_spec.validate import validate_file
 
-ROOT = Path(__file__).resolve().parents[1]
 SPECS = sorted(p.relative_to(ROOT).as_posix() for p in (ROOT / "specs").glob("**/*.yaml"))
-
-
-def dcts(*args: str) -> subprocess.CompletedProcess:
-    """Run the `dcts` command line of this environment."""
-    script = Path(sys.executable).with_name("dcts")
-    command = [str(script)] if script.is_file() else [sys.executable, "-c", "from dcts_spec.cli import main; main()"]
-    return subprocess.run([*command, *args], cwd=ROOT, capture_output=True, text=True, timeout=300)
 
 
 @pytest.fixture(scope="module")
@@ -152,9 +144,6 @@ def test_warnings_through_the_cli(warning_specs: tuple[Path, Path]) -> None:
 
 def test_any_urdf_by_path(tmp_path: Path) -> None:
     """A URDF given by a path relative to the spec file, and one by an absolute path (UR5)."""
-    from dcts_spec.robot.builtin import example_robot_data_dir, iiwa14_urdf_path
-    from dcts_spec.validate import validate_file
-
     (tmp_path / "robots").mkdir()
     (tmp_path / "robots" / "arm.urdf").write_text(iiwa14_urdf_path().read_text())
     ur5 = example_robot_data_dir() / "ur_description" / "urdf" / "ur5_robot.urdf"

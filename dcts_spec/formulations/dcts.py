@@ -56,8 +56,8 @@ class HierarchyQP:
     nominal_acceleration: ca.SX  # a at s = 1, δ = 0, z = 0
     hessian: ca.SX
     gradient: ca.SX
-    lbx: list
-    ubx: list
+    lbx: list[float]
+    ubx: list[float]
     scaling_columns: list[int]  # x index of each exact level's s
     z_columns: list[int]
 
@@ -69,6 +69,7 @@ class HierarchyQP:
 
 
 def hierarchy_qp(problem: ControlProblem) -> HierarchyQP:
+    """The hierarchy parametrized by x = (s, δ, z) and the objective of dcts, without bounds."""
     structure = level_structure(problem)
     levels = problem.levels
     exact = levels[: structure.exact_levels]
@@ -120,13 +121,13 @@ def hierarchy_qp(problem: ControlProblem) -> HierarchyQP:
     return HierarchyQP(structure, variables, acceleration, nominal, H, f, lbx, ubx, list(range(k)), z_columns)
 
 
-def level_scaling(problem: ControlProblem, hqp: HierarchyQP, nx: int) -> Affine:
+def level_scaling(problem: ControlProblem, hqp: HierarchyQP) -> Affine:
     """One scaling per priority level: sᵢ for exact levels; for a least-squares lowest level, the
     share of its unconstrained correction that is achieved, ⟨J Z z, J Z z*⟩/‖J Z z*‖² (1 when the
     bounds leave it alone, less when they make it give in; 1 when it needs no correction)."""
     levels = problem.levels
     offset = ca.SX.ones(len(levels))
-    matrix = ca.SX(len(levels), nx)
+    matrix = ca.SX(len(levels), len(hqp.variables))
     for i, column in enumerate(hqp.scaling_columns):
         offset[i] = 0.0
         matrix[i, column] = 1.0
@@ -147,4 +148,4 @@ def dcts(problem: ControlProblem) -> ControlLaw:
     notes = []
     if hqp.structure.least_squares_last:
         notes.append(f"priority {problem.levels[-1].priority} is over-constrained: solved in least squares")
-    return ControlLaw(torque, level_scaling(problem, hqp, qp.nx), qp, notes)
+    return ControlLaw(torque, level_scaling(problem, hqp), qp, notes)

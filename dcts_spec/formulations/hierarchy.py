@@ -5,7 +5,7 @@ For levels i = 1..k, with N₀ = I and the actual acceleration a₀ = M⁻¹(τ_
     J_i|prev = J_i N_{i−1}                         restricted Jacobian
     J̄_i      = M⁻¹ J_i|prevᵀ (J_i|prev M⁻¹ J_i|prevᵀ)⁻¹   dynamically consistent pseudo-inverse
     a_i      = a_{i−1} + J̄_i (v_i − J̇_i q̇ − J_i a_{i−1})
-    N_i      = N_{i−1} − J̄_i J_i|prev              N_iᵀ = I − J_iᵀ J̄_iᵀ … (torque projector)
+    N_i      = N_{i−1} − J̄_i J_i|prev              null-space projector (N_iᵀ acts on torques)
 
 so J_i a_k = v_i − J̇_i q̇ for every level (v_i is the commanded task acceleration) as long as
 it does not conflict with the levels above, and a_k − a₀ is the smallest correction in the
@@ -117,7 +117,7 @@ class LevelStructure:
     free_dimension: int  # joint-space freedom left after the exact levels
 
 
-def level_structure(problem: ControlProblem, seed: int = 0) -> LevelStructure:
+def level_structure(problem: ControlProblem) -> LevelStructure:
     """Classify the levels from their restricted ranks at random configurations.
 
     Only the lowest level may be over-constrained (e.g. a posture task taking whatever freedom
@@ -126,11 +126,10 @@ def level_structure(problem: ControlProblem, seed: int = 0) -> LevelStructure:
     levels = problem.levels
     f = ca.Function("jacobians", [problem.q], [*[lv.jacobian for lv in levels], problem.mass_matrix])
     robot = problem.robot
-    rng = np.random.default_rng(seed)
+    rng = np.random.default_rng(0)  # seeded: a spec always compiles to the same structure
     lo = np.where(np.isfinite(robot.limits.q_min), robot.limits.q_min, -np.pi)
     hi = np.where(np.isfinite(robot.limits.q_max), robot.limits.q_max, np.pi)
     deficient = np.zeros(len(levels), dtype=bool)
-    free = problem.n
     for _ in range(RANK_SAMPLES):
         out = [np.array(o) for o in f(rng.uniform(lo, hi))]
         jacobians, M = out[:-1], out[-1]
@@ -144,8 +143,6 @@ def level_structure(problem: ControlProblem, seed: int = 0) -> LevelStructure:
                 break
             Jbar = Minv @ Jr.T @ np.linalg.inv(Jr @ Minv @ Jr.T)
             N = N - Jbar @ Jr
-        exact = int(np.argmax(deficient)) if deficient.any() else len(levels)
-        free = min(free, problem.n - sum(lv.dim for lv in levels[:exact]))
     bad = [i for i in range(len(levels) - 1) if deficient[i]]
     if bad:
         p = levels[bad[0]].priority

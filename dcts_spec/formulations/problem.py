@@ -31,7 +31,6 @@ class Level:
     bias: ca.SX  # J̇ q̇ (m)
     target: ca.SX  # ẍ_d (m)
     error: ca.SX  # Δx (m)
-    velocity: ca.SX  # ẋ (m)
     weight: float
 
     @property
@@ -128,7 +127,6 @@ def build_problem(spec: Spec, robot: Robot) -> ControlProblem:
                 ca.vertcat(*[t.bias for t in terms]),
                 ca.vertcat(*[t.target for t in terms]),
                 ca.vertcat(*[t.error for t in terms]),
-                ca.vertcat(*[t.velocity for t in terms]),
                 weight,
             )
         )

@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import casadi as ca
 
-from ..limits.joint import joint_rows
 from ..symbolic.linalg import spd_inverse
 from .hierarchy import LevelStructure, least_squares_step, level_structure, recursive_hierarchy
 from .problem import ControlProblem
@@ -28,13 +27,14 @@ BIG = 1e6
 
 
 def _joint_bounds(problem: ControlProblem) -> tuple[ca.SX, ca.SX]:
-    """Per-joint acceleration bounds (±BIG for joints without limits)."""
+    """Per-joint acceleration bounds, the problem's joint rows (±BIG for joints without limits)."""
     n = problem.n
-    rows = joint_rows(problem.robot.limits, problem.q, problem.dq, problem.period, problem.robot.joint_names)
+    rows = problem.acceleration_rows
     lower, upper = -BIG * ca.SX.ones(n), BIG * ca.SX.ones(n)
     for r, name in enumerate(rows.names):
-        j = problem.robot.joint_names.index(name.removeprefix("joint:"))
-        lower[j], upper[j] = rows.lower[r], rows.upper[r]
+        if name.startswith("joint:"):
+            j = problem.robot.joint_names.index(name.removeprefix("joint:"))
+            lower[j], upper[j] = rows.lower[r], rows.upper[r]
     return lower, upper
 
 

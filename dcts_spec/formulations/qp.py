@@ -77,8 +77,8 @@ def with_limits(
     acceleration: Affine,
     hessian: ca.SX,
     gradient: ca.SX,
-    lbx: list,
-    ubx: list,
+    lbx: list[float],
+    ubx: list[float],
     variables: list[str],
 ) -> tuple[QP, Affine]:
     """Add the torque bounds and the joint/Cartesian acceleration bounds to an objective in x.
@@ -96,7 +96,16 @@ def with_limits(
     return qp, torque
 
 
-def relaxed_qp(H, f, A, lba, uba, lbx, ubx, relaxable_rows: int):
+def relaxed_qp(
+    H: np.ndarray,
+    f: np.ndarray,
+    A: np.ndarray,
+    lba: np.ndarray,
+    uba: np.ndarray,
+    lbx: np.ndarray,
+    ubx: np.ndarray,
+    relaxable_rows: int,
+) -> tuple[np.ndarray, ...]:
     """The QP data with each of the last `relaxable_rows` rows widened by a slack sᵣ ≥ 0.
 
     Variables (x, s); objective ½xᵀHx + fᵀx + ½ρ‖s‖² with ρ = RELAXATION_WEIGHT · max|H_ii|;

@@ -20,13 +20,17 @@ from __future__ import annotations
 
 import casadi as ca
 
+# The state is symbolic in the controller and numeric in the tests; the bounds are then SX or DM.
+Scalar = ca.SX | float
+Bound = ca.SX | ca.DM
+
 _TINY = 1e-12
 # Beyond a bound, the position terms ask for absurd accelerations (~1/dt²); this keeps the QP
 # data well scaled while still asking for far more than any robot can do.
 _HUGE = 1e6
 
 
-def _upper_from_position(x, v, x_max, braking, dt):
+def _upper_from_position(x: Scalar, v: Scalar, x_max: float, braking: float, dt: float) -> Bound:
     """Largest a keeping x ≤ x_max during the step, apex of the parabola included."""
     end_of_step = 2.0 * (x_max - x - dt * v) / dt**2
     stop = -v / dt
@@ -41,7 +45,7 @@ def _upper_from_position(x, v, x_max, braking, dt):
     return ca.if_else(inside_apex, apex, end_of_step)
 
 
-def _upper_from_viability(x, v, x_max, braking, dt):
+def _upper_from_viability(x: Scalar, v: Scalar, x_max: float, braking: float, dt: float) -> Bound:
     """Largest a with dt² a² + (2 dt v + b dt²) a + v² − 2 b (x_max − x − dt v) ≤ 0, i.e. the next
     state x⁺ = x + dt v + ½dt² a, v⁺ = v + dt a can still stop before x_max braking at b."""
     qa = dt**2
@@ -54,14 +58,17 @@ def _upper_from_viability(x, v, x_max, braking, dt):
     return ca.fmax(ca.if_else(delta >= 0, root, stop), stop)
 
 
-def _upper(x, v, x_max, braking, dt):
+def _upper(x: Scalar, v: Scalar, x_max: float, braking: float, dt: float) -> Bound:
     return ca.fmin(_upper_from_position(x, v, x_max, braking, dt), _upper_from_viability(x, v, x_max, braking, dt))
 
 
-def acceleration_bounds(x, v, x_min, x_max, v_max, accel_limit, braking, dt):
+def acceleration_bounds(
+    x: Scalar, v: Scalar, x_min: float, x_max: float, v_max: float, accel_limit: float, braking: float, dt: float
+) -> tuple[Bound, Bound]:
     """(lower, upper) bounds on the acceleration of a coordinate for the next control period.
 
-    x and v may be CasADi expressions; the bounds are numbers, ±inf where there is none.
+    x and v are the state (CasADi expressions or numbers); the limits are numbers, ±inf where
+    there is none. The bounds are clipped to ±_HUGE, so they are finite even without any limit.
     """
     inf = float("inf")
     upper = ca.SX(inf)

@@ -25,8 +25,9 @@ class JointLimits:
         n = model.nv
 
         def clean(values: np.ndarray, missing_if_zero: bool) -> np.ndarray:
-            out = np.array(values, dtype=float).copy()
-            out[np.abs(out) >= 1e10] = np.inf * np.sign(out[np.abs(out) >= 1e10])
+            out = np.array(values, dtype=float)
+            huge = np.abs(out) >= 1e10
+            out[huge] = np.copysign(np.inf, out[huge])
             if missing_if_zero:
                 out[out <= 0] = np.inf
             return out

@@ -8,7 +8,9 @@ import numpy as np
 import pinocchio as pin
 
 from ..spec import Diagnostic, Spec, SpecError
-from ..spec.errors import did_you_mean
+from ..spec.errors import KeyPath, did_you_mean
+from ..spec.limits import JointAccelerationLimits, JointTorqueLimits, JointVelocityLimits
+from ..spec.source import SourceMap
 from ..spec.types import as_list, size_of
 from ..spec.units import to_si
 from .builtin import builtin_locked_joints, builtin_urdf_path, lock_joints
@@ -68,7 +70,7 @@ def _load_model(spec: Spec, diags: list[Diagnostic]) -> tuple[pin.Model | None, 
     return lock_joints(full, locked), path
 
 
-def _check_joint_types(model: pin.Model, src, diags: list[Diagnostic]) -> None:
+def _check_joint_types(model: pin.Model, src: SourceMap, diags: list[Diagnostic]) -> None:
     for jid in range(1, model.njoints):
         joint = model.joints[jid]
         if joint.nq != 1 or joint.nv != 1:
@@ -101,7 +103,9 @@ def _add_frames(spec: Spec, model: pin.Model, diags: list[Diagnostic]) -> None:
         )
 
 
-def _vector(value, unit: str, n: int, path: tuple, src, diags: list[Diagnostic], what: str) -> np.ndarray | None:
+def _vector(
+    value: float | tuple[float, ...], unit: str, n: int, path: KeyPath, src: SourceMap, diags: list[Diagnostic], what: str
+) -> np.ndarray | None:
     """A scalar-or-vector limit in SI, or None (with a diagnostic) if its size is wrong."""
     size = size_of(value)
     if size is not None and size != n:
@@ -114,7 +118,7 @@ def _merge_limits(spec: Spec, urdf: JointLimits, n: int, diags: list[Diagnostic]
     """Spec limits override the URDF's; wider than the URDF only when explicitly allowed."""
     src = spec.source
     lim = spec.limits
-    q_min, q_max, a_max = urdf.q_min, urdf.q_max, urdf.a_max
+    q_min, q_max = urdf.q_min, urdf.q_max
     if (jp := lim.joint_position) is not None:
         base = ("limits", "joint_position")
         lo = _vector(jp.min, jp.unit, n, base + ("min",), src, diags, "min") if jp.min is not None else q_min
@@ -130,12 +134,20 @@ def _merge_limits(spec: Spec, urdf: JointLimits, n: int, diags: list[Diagnostic]
             _outside(hi > urdf.q_max + 1e-9, base + ("max",), "above the URDF's upper limit", jp.allow_outside_urdf, src, diags)
             q_min, q_max = lo, hi
     v_max = _symmetric(lim.joint_velocity, "joint_velocity", urdf.v_max, "velocity", n, src, diags)
-    a_max = _symmetric(lim.joint_acceleration, "joint_acceleration", a_max, None, n, src, diags)
+    a_max = _symmetric(lim.joint_acceleration, "joint_acceleration", urdf.a_max, None, n, src, diags)
     tau_max = _symmetric(lim.joint_torque, "joint_torque", urdf.tau_max, "effort", n, src, diags)
     return JointLimits(q_min=q_min, q_max=q_max, v_max=v_max, tau_max=tau_max, a_max=a_max)
 
 
-def _symmetric(section, key: str, urdf: np.ndarray, urdf_name: str | None, n: int, src, diags) -> np.ndarray:
+def _symmetric(
+    section: JointVelocityLimits | JointAccelerationLimits | JointTorqueLimits | None,
+    key: str,
+    urdf: np.ndarray,
+    urdf_name: str | None,
+    n: int,
+    src: SourceMap,
+    diags: list[Diagnostic],
+) -> np.ndarray:
     """A symmetric bound |x| ≤ max from the spec (checked), or the URDF's where the spec has none.
 
     `urdf_name` is None for bounds the URDF does not declare (accelerations): no comparison then.
@@ -152,13 +164,13 @@ def _symmetric(section, key: str, urdf: np.ndarray, urdf_name: str | None, n: in
     return values
 
 
-def _positive(values: np.ndarray, path: tuple, src, diags: list[Diagnostic]) -> None:
+def _positive(values: np.ndarray, path: KeyPath, src: SourceMap, diags: list[Diagnostic]) -> None:
     bad = np.flatnonzero(values <= 0)
     if bad.size:
         diags.append(src.diagnostic(path, f"must be > 0 (joint {bad[0] + 1}: {values[bad[0]]:.4g})"))
 
 
-def _outside(mask: np.ndarray, path: tuple, what: str, allowed: bool, src, diags: list[Diagnostic]) -> None:
+def _outside(mask: np.ndarray, path: KeyPath, what: str, allowed: bool, src: SourceMap, diags: list[Diagnostic]) -> None:
     joints = [int(j) + 1 for j in np.flatnonzero(mask)]
     if not joints:
         return

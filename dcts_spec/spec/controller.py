@@ -9,7 +9,6 @@ from pydantic import Field
 from .types import Number, NumberList, ScalarOrVector, StrictModel
 
 Formulation = Literal["dcts", "osc", "projector", "qp_mt", "qp_md"]
-FORMULATIONS: tuple[str, ...] = ("dcts", "osc", "projector", "qp_mt", "qp_md")
 Solver = Literal["daqp", "qpoases"]
 
 

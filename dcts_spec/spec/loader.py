@@ -42,8 +42,10 @@ def _diagnostics(exc: ValidationError, data: Any, source: SourceMap) -> list[Dia
     for error in exc.errors(include_url=False):
         path, rest = _data_path(data, error["loc"])
         blamed = error.get("ctx", {}).get("error")
-        if isinstance(blamed, FieldError) and isinstance(_value_at(data, path), dict) and blamed.key in _value_at(data, path):
-            path = path + (blamed.key,)
+        if isinstance(blamed, FieldError):
+            value = _value_at(data, path)
+            if isinstance(value, dict) and blamed.key in value:
+                path = path + (blamed.key,)
         key = path + rest if error["type"] in ("missing", "extra_forbidden") else path
         rank = _GENERIC_RANK.get(error["type"], 0)
         # A union reports one error per alternative; keep the most specific one.

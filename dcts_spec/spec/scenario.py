@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import Annotated, Literal
 
-from pydantic import Field, model_validator
+from pydantic import Field
 
 from .types import Integer, Number, NumberList, ScalarOrVector, StrictModel, Vec3
 from .units import AngleUnit

@@ -68,6 +68,8 @@ _LIST_SCHEMA = {"type": "array", "items": _NUMBER_SCHEMA, "minItems": 1}
 Number = Annotated[float, Strict(), AllowInfNan(False)]
 # Strict: YAML reads `yes`/`on` as true, and a lax int would take true (and "1") as 1.
 Integer = Annotated[int, Strict()]
+
+
 def _serialize(value: Any) -> Any:
     """Vectors serialize as lists (however they were stored)."""
     return list(value) if isinstance(value, (list, tuple)) else value

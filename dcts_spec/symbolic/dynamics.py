@@ -208,7 +208,7 @@ class _Joint:
             else _Spatial(_zeros3(), axis_parent)
         )
 
-    def subspace(self, x: ca.SX) -> _Spatial:
+    def subspace(self, x: ca.SX | float) -> _Spatial:
         """S x: the joint's motion subspace in frame i, scaled by a joint rate x."""
         ax = self.axis * x
         return _Spatial(ax, _zeros3()) if self.revolute else _Spatial(_zeros3(), ax)

@@ -40,7 +40,6 @@ class TaskTerms:
     jacobian: ca.SX  # J (m × n)
     bias: ca.SX  # J̇ q̇ (m)
     error: ca.SX  # Δx = x_d − x (m), on SO(3) for rotations
-    velocity: ca.SX  # ẋ = J q̇ (m)
     target: ca.SX  # ẍ_d (m), from the gains
 
 
@@ -83,9 +82,9 @@ class Task(ABC):
         """The reference baked into the controller (empty for a pure damping task)."""
 
     @property
+    @abstractmethod
     def row_names(self) -> tuple[str, ...]:
         """Names of the task's rows (axes or joints), for logs and layouts."""
-        return tuple(f"{self.name}[{i}]" for i in range(self.dim))
 
     def reference_inputs(self, offset: int) -> list[ReferenceInput]:
         """The slices of `ref` this task reads, starting at `offset`."""
@@ -111,7 +110,7 @@ class Task(ABC):
         velocity_ff = reference.get("velocity", ca.SX.zeros(self.dim))
         acceleration_ff = reference.get("acceleration", ca.SX.zeros(self.dim))
         target = acceleration_ff + self._feedback(error, velocity - velocity_ff)
-        return TaskTerms(jacobian, bias, error, velocity, target)
+        return TaskTerms(jacobian, bias, error, target)
 
     def _feedback(self, error: ca.SX, velocity_error: ca.SX) -> ca.SX:
         """ẍ_d = kp Δx − kd ẋ, or with `max_velocity` the velocity-saturated law of the paper's
