@@ -5,6 +5,8 @@ from __future__ import annotations
 import json
 import os
 import sys
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Annotated, Optional
 
@@ -21,12 +23,19 @@ app = typer.Typer(
 )
 
 
-def _fail(error: SpecError, as_json: bool = False) -> None:
-    if as_json:
-        typer.echo(json.dumps({"valid": False, "diagnostics": [d.to_dict() for d in error.diagnostics]}, indent=2))
-    else:
+@contextmanager
+def _exit_1_on_errors() -> Iterator[None]:
+    """A broken spec or a bundle that cannot be generated or built: one message, exit code 1."""
+    from .codegen import CodegenError
+
+    try:
+        yield
+    except SpecError as error:
         typer.echo(str(error), err=True)
-    raise typer.Exit(1)
+        raise typer.Exit(1) from None
+    except CodegenError as error:
+        typer.echo(f"error: {error}", err=True)
+        raise typer.Exit(1) from None
 
 
 @app.command()
@@ -71,9 +80,13 @@ def schema(
     text = spec_json_schema_text()
     if output is None:
         typer.echo(text, nl=False)
-    else:
+        return
+    try:
         output.write_text(text, encoding="utf-8")
-        typer.echo(f"wrote {output}")
+    except OSError as error:
+        typer.echo(f"error: cannot write {output}: {error.strerror}", err=True)
+        raise typer.Exit(1) from None
+    typer.echo(f"wrote {output}")
 
 
 _RUNTIME_HELP = "controller in the loop: c (the generated C bundle) or python (CasADi from Python)"
@@ -138,16 +151,11 @@ def compile_(
     as_json: Annotated[bool, typer.Option("--json", help="print the bundle's manifest")] = False,
 ) -> None:
     """Generate the C bundle of a spec (QP data, DAQP solve, header, build files, golden test) and build it."""
-    from .codegen import CodegenError, compile_bundle
+    from .codegen import compile_bundle
 
-    try:
+    with _exit_1_on_errors():
         report = compile_bundle(file, output, formulation=formulation, build=not no_build, target=target,
                                 daqp_src=daqp_src, qemu=qemu, warm_start=warm_start)
-    except SpecError as error:
-        _fail(error)
-    except CodegenError as error:
-        typer.echo(f"error: {error}", err=True)
-        raise typer.Exit(1)
     typer.echo(json.dumps(report.manifest, indent=2) if as_json else "\n".join(report.lines()))
 
 
@@ -160,17 +168,11 @@ def bench(
     python_states: Annotated[int, typer.Option(help="states timed in the Python runtime")] = 500,
 ) -> None:
     """Time the generated C step (data and solve), the Python runtime and Pinocchio's dynamics terms."""
-    from .codegen import CodegenError
     from .codegen.bench import bench as run_bench
     from .codegen.bench import format_report
 
-    try:
+    with _exit_1_on_errors():
         result = run_bench(file, formulation=formulation, states=states, python_states=python_states)
-    except SpecError as error:
-        _fail(error)
-    except CodegenError as error:
-        typer.echo(f"error: {error}", err=True)
-        raise typer.Exit(1)
     typer.echo(json.dumps(result, indent=2) if as_json else format_report(result))
 
 

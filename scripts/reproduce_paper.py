@@ -39,7 +39,6 @@ import math
 import shutil
 import subprocess
 import sys
-import tempfile
 import time
 import warnings
 from collections.abc import Callable, Iterable
@@ -115,6 +114,7 @@ EXPERIMENTS: dict[str, dict[str, Any]] = {
     },
 }
 
+
 def _vsat(value: float) -> tuple:
     return ((("tasks", 0, "gains", "max_velocity"), value),)
 
@@ -160,6 +160,11 @@ SENSITIVITY: dict[str, dict[str, Any]] = {
 SHORT_SENSITIVITY = ("exp3_vsat_0.85",)  # also run by --short: experiment 3's claims need it
 
 
+def study(key: str) -> dict[str, Any]:
+    """An experiment or a sensitivity study by its key."""
+    return EXPERIMENTS.get(key) or SENSITIVITY[key]
+
+
 # -- running ---------------------------------------------------------------------------------------
 
 def _apply(data: dict, overrides: Iterable[tuple[tuple[Any, ...], Any]]) -> dict:
@@ -189,23 +194,18 @@ def simulate(run: Run, runtime: str = "c", duration: float | None = None,
              extra: Iterable[tuple[tuple[Any, ...], Any]] = ()) -> RunResult:
     """Simulate one run (C runtime falls back to Python when it cannot be built here)."""
     spec = load_run_spec(run, extra)
-    with tempfile.TemporaryDirectory(prefix="dcts-paper-") as work:
-        try:
-            sim = prepare_simulation(spec, runtime=runtime, formulation=run.formulation, duration=duration,
-                                     work_dir=work)
-        except RuntimeUnavailable as error:
-            warnings.warn(f"{run.spec} {run.formulation}: {error}; using the Python runtime", stacklevel=2)
-            sim = prepare_simulation(spec, runtime="python", formulation=run.formulation, duration=duration,
-                                     work_dir=work)
-        log = sim.run()
-        return analyze(sim, log, label=run.label)
+    try:
+        sim = prepare_simulation(spec, runtime=runtime, formulation=run.formulation, duration=duration)
+    except RuntimeUnavailable as error:
+        warnings.warn(f"{run.spec} {run.formulation}: {error}; using the Python runtime", stacklevel=2)
+        sim = prepare_simulation(spec, runtime="python", formulation=run.formulation, duration=duration)
+    return analyze(sim, sim.run(), label=run.label)
 
 
 def short_settings(key: str) -> tuple[float | None, tuple]:
     """(duration, spec changes) of a shortened experiment: a duration, and for the octagon its
     first points only."""
-    info = EXPERIMENTS.get(key) or SENSITIVITY[key]
-    short = info.get("short")
+    short = study(key).get("short")
     if not isinstance(short, dict):
         return short, ()
     data = yaml.safe_load((SPECS / "exp3_octagon.yaml").read_text(encoding="utf-8"))
@@ -215,19 +215,19 @@ def short_settings(key: str) -> tuple[float | None, tuple]:
 
 def run_experiment(key: str, runtime: str, short: bool, runs: list[Run] | None = None) -> dict[str, RunResult]:
     """Simulate an experiment's (or a sensitivity study's) runs; `short`: the shortened version."""
-    info = EXPERIMENTS.get(key) or SENSITIVITY[key]
     duration, extra = short_settings(key) if short else (None, ())
-    return {r.label: simulate(r, runtime, duration, extra) for r in (runs or info["runs"])}
+    return {r.label: simulate(r, runtime, duration, extra) for r in (runs or study(key)["runs"])}
 
 
 # -- small helpers -----------------------------------------------------------------------------------
 
-def _f(x: Any) -> float | None:
-    return None if x is None else float(x)
-
-
 def _norms(a: np.ndarray) -> np.ndarray:
     return np.linalg.norm(a, axis=1)
+
+
+def _task_error(run: RunResult) -> np.ndarray:
+    """‖Δx‖ per sample of the run's first task (the one each experiment is about)."""
+    return _norms(next(iter(run.series.task_errors.values())))
 
 
 def _angle_deg(a: np.ndarray, b: np.ndarray) -> float | None:
@@ -243,10 +243,6 @@ def _index(run: RunResult, t: float) -> int:
 
 def _tool(run: RunResult) -> np.ndarray:
     return run.series.frame_positions["tool"]
-
-
-def _v_max(run: RunResult) -> np.ndarray:
-    return np.where(np.isfinite(run.robot.limits.v_max), run.robot.limits.v_max, np.inf)
 
 
 def _tau_at_limit(run: RunResult, tol: float = 1e-3) -> np.ndarray:
@@ -295,7 +291,7 @@ def analyze_exp1(runs: dict[str, RunResult]) -> dict[str, Any]:
         t, T = r.log.time, r.log.duration
         span = min(1.0, T / 3)
         null, task = r.series.null_kinetic_energy, r.series.task_kinetic_energy
-        err = _norms(next(iter(r.series.task_errors.values())))
+        err = _task_error(r)
         first, last = t < span, t >= T - span
         tool = _tool(r)
         transient = t < 0.3
@@ -430,7 +426,7 @@ def analyze_exp2(runs: dict[str, RunResult], push: dict[str, Any] | None = None)
         m["null_space_ke_injected"] = float(r.series.null_kinetic_energy[ks:kend + 1].max()
                                             - r.series.null_kinetic_energy[ks])
         m["acceleration_energy_push_window"] = float(r.series.acceleration_energy[ks:kend + 1].sum() * r.log.period)
-        err = _norms(next(iter(r.series.task_errors.values())))
+        err = _task_error(r)
         m["task_error_max"] = float(err.max())
         m["task_error_final"] = float(err[-1])
         tool = _tool(r)
@@ -487,8 +483,7 @@ def analyze_exp2(runs: dict[str, RunResult], push: dict[str, Any] | None = None)
         + ", ".join(f"{k} {free_end[k]:.1f}°" for k in labels),
         worst_intuitive <= 10 and all(a > 2 * worst_intuitive for a in others),
         "OSC's and DCTS's angles to Λ⁻¹f (rotations held) ≤ 10° at the push end, QP-MT's and QP-MD's more "
-        "than twice "
-        "as large"))
+        "than twice as large"))
     return {"metrics": metrics, "claims": claims}
 
 
@@ -539,7 +534,7 @@ def table2_errors(run: RunResult) -> dict[str, float]:
 def analyze_exp3(runs: dict[str, RunResult]) -> dict[str, Any]:
     metrics = {}
     for label, r in runs.items():
-        v_ratio = np.abs(r.log.dq) / _v_max(r)
+        v_ratio = np.abs(r.log.dq) / r.robot.limits.v_max
         violating = np.any(v_ratio > 1.0 + 1e-3, axis=1)  # more than 0.1 % over
         sat = _tau_at_limit(r)
         scaled = np.min(r.log.scaling, axis=1) < 1.0 - 1e-3
@@ -618,7 +613,7 @@ def analyze_exp3(runs: dict[str, RunResult]) -> dict[str, Any]:
 def analyze_exp4(runs: dict[str, RunResult], joint: int = 5) -> dict[str, Any]:
     metrics = {}
     for label, r in runs.items():
-        v_ratio = np.abs(r.log.dq) / _v_max(r)
+        v_ratio = np.abs(r.log.dq) / r.robot.limits.v_max
         excess = np.maximum(v_ratio - 1.0, 0.0)
         q = r.log.q
         lim = r.robot.limits
@@ -661,7 +656,7 @@ def analyze_exp5(runs: dict[str, RunResult]) -> dict[str, Any]:
     for label, r in runs.items():
         tool = _tool(r)
         d = tool - tool[0]
-        err = _norms(next(iter(r.series.task_errors.values())))
+        err = _task_error(r)
         metrics[label] = common_metrics(r) | {
             "tool_displacement_final": d[-1].tolist(),
             "tool_z_min": float(d[:, 2].min()),
@@ -742,15 +737,14 @@ def analyze_sensitivity(key: str, runs: dict[str, RunResult]) -> dict[str, Any]:
         return _prefixed(key, analyze_exp4(runs))
     if key == "exp1_semi_implicit":
         r = runs["qp_mt"]
-        return {"metrics": {"qp_mt": common_metrics(r) | {
-            "task_error_final": float(_norms(next(iter(r.series.task_errors.values())))[-1])}}, "claims": []}
+        return {"metrics": {"qp_mt": common_metrics(r) | {"task_error_final": float(_task_error(r)[-1])}},
+                "claims": []}
     if key == "exp5_0.5s":
         return _prefixed(key, analyze_exp5(runs))
     if key == "exp5_payload_com":
         return {"metrics": {label: {"tool_displacement_final": (_tool(r)[-1] - _tool(r)[0]).tolist(),
                                     "acceleration_energy_integral": r.summary["acceleration_energy_integral"],
-                                    "task_error_max_deg": float(np.degrees(_norms(
-                                        next(iter(r.series.task_errors.values()))).max()))}
+                                    "task_error_max_deg": float(np.degrees(_task_error(r).max()))}
                             for label, r in runs.items()}, "claims": []}
     raise KeyError(key)
 
@@ -772,8 +766,7 @@ def figures_exp1(runs: dict[str, RunResult]) -> dict[str, Figure]:
         t = r.log.time
         task.plot(t, r.series.task_kinetic_energy, color=_color(label), lw=1.2, label=label)
         null.semilogy(t, np.maximum(r.series.null_kinetic_energy, 1e-12), color=_color(label), lw=1.2, label=label)
-        err.semilogy(t, np.maximum(np.degrees(_norms(next(iter(r.series.task_errors.values())))), 1e-6),
-                     color=_color(label), lw=1.2, label=label)
+        err.semilogy(t, np.maximum(np.degrees(_task_error(r)), 1e-6), color=_color(label), lw=1.2, label=label)
     task.set_ylabel("task-space KE [J]")
     null.set_ylabel("null-space KE [J]")
     null.set_ylim(1e-8, None)
@@ -854,14 +847,13 @@ def figures_exp3(runs: dict[str, RunResult], prefix: str = "exp3") -> dict[str, 
         ax.set_xlabel("y [m]")
         ax.set_ylabel("z [m]")
         reached = f"{r.summary['waypoints_reached']}/{r.summary['waypoints_total']}"
-        ax.set_title(f"{label}: tool path (y-z), {reached} points",
-                     fontsize=9)
+        ax.set_title(f"{label}: tool path (y-z), {reached} points", fontsize=9)
     fig = Figure(figsize=(10, 8.5), layout="constrained")
     vel, tau, scale, acc = fig.subplots(4, 1, sharex=True)
     for label in labels:
         r = runs[label]
         t = r.log.time
-        vel.plot(t, np.max(np.abs(r.log.dq) / _v_max(r), axis=1), color=_color(label), lw=0.8, label=label)
+        vel.plot(t, np.max(np.abs(r.log.dq) / r.robot.limits.v_max, axis=1), color=_color(label), lw=0.8, label=label)
         tau.plot(t, np.max(np.abs(r.log.tau) / r.robot.limits.tau_max, axis=1), color=_color(label), lw=0.8,
                  label=label)
         scale.plot(t, np.min(r.log.scaling, axis=1), color=_color(label), lw=0.8, label=label)
@@ -894,7 +886,8 @@ def figures_exp4(runs: dict[str, RunResult], joint: int = 5, prefix: str = "exp4
     j = joint - 1
     for label, r in runs.items():
         t = r.log.time
-        vel.plot(t, r.log.dq[:, j] / _v_max(r)[j], color=_color(label), lw=1.0, label=f"joint {joint}, τ_ext {label}")
+        vel.plot(t, r.log.dq[:, j] / r.robot.limits.v_max[j], color=_color(label), lw=1.0,
+                 label=f"joint {joint}, τ_ext {label}")
         pos.plot(t, np.degrees(r.log.q[:, j]), color=_color(label), lw=1.0, label=f"joint {joint}, τ_ext {label}")
         pos.plot(t, np.degrees(r.log.q[:, 1]), color=_color(label), lw=0.8, ls=":", label=f"joint 2, τ_ext {label}")
     r = next(iter(runs.values()))
@@ -922,8 +915,7 @@ def figures_exp5(runs: dict[str, RunResult], prefix: str = "exp5") -> dict[str, 
         t, d = r.log.time, _tool(r) - _tool(r)[0]
         for ax, i in ((px, 0), (py, 1), (pz, 2)):
             ax.plot(t, d[:, i] * 1000, color=_color(label), lw=1.2, label=label)
-        err.plot(t, np.degrees(_norms(next(iter(r.series.task_errors.values())))), color=_color(label), lw=1.2,
-                 label=label)
+        err.plot(t, np.degrees(_task_error(r)), color=_color(label), lw=1.2, label=label)
         acc.plot(t, np.cumsum(r.series.acceleration_energy) * r.log.period, color=_color(label), lw=1.2, label=label)
         ke.plot(t, r.series.kinetic_energy, color=_color(label), lw=1.2, label=label)
     for ax, name in ((px, "Δx"), (py, "Δy"), (pz, "Δz")):
@@ -1094,27 +1086,30 @@ def table2(exp3: dict[str, Any], vsat085: dict[str, Any] | None) -> str:
     return "\n".join(out)
 
 
+SENSITIVITY_ROWS = {
+    "exp3_vsat_0.85": ROWS["exp3"],
+    "exp3_default_weight": ROWS["exp3"],
+    "exp4_semi_implicit": ROWS["exp4"],
+    "exp1_semi_implicit": [("null-space KE peak [J]", "null_space_kinetic_energy_peak", 1),
+                           ("final orientation error [°]", "task_error_final", 180 / math.pi),
+                           ("worst velocity excess [% of limit]", "max_joint_velocity_violation_ratio", 100),
+                           ("steps with relaxed limits", "limits_relaxed", 1),
+                           ("∫ acceleration energy", "acceleration_energy_integral", 1)],
+    "exp5_0.5s": ROWS["exp5"],
+    "exp5_payload_com": [("tool displacement at the end (x, y, z) [mm]", "tool_displacement_final", 1000),
+                         ("max orientation error [°]", "task_error_max_deg", 1),
+                         ("∫ acceleration energy", "acceleration_energy_integral", 1)],
+}
+
+
 def sensitivity_markdown(key: str, result: dict[str, Any]) -> str:
+    """The study's metrics, one column per run, and its claims if it has any."""
     m = result["metrics"]
-    if key == "exp3_vsat_0.85":
-        return metrics_table(m, ROWS["exp3"], ["projector", "dcts"]) + "\n\n" + claims_table(result["claims"])
-    if key == "exp3_default_weight":
-        return metrics_table(m, ROWS["exp3"], list(m))
-    if key == "exp4_semi_implicit":
-        return metrics_table(m, ROWS["exp4"], ["measured", "ignored"]) + "\n\n" + claims_table(result["claims"])
-    if key == "exp1_semi_implicit":
-        return metrics_table(m, [("null-space KE peak [J]", "null_space_kinetic_energy_peak", 1),
-                                 ("final orientation error [°]", "task_error_final", 180 / math.pi),
-                                 ("worst velocity excess [% of limit]", "max_joint_velocity_violation_ratio", 100),
-                                 ("steps with relaxed limits", "limits_relaxed", 1),
-                                 ("∫ acceleration energy", "acceleration_energy_integral", 1)], ["qp_mt"])
-    if key == "exp5_0.5s":
-        return metrics_table(m, ROWS["exp5"], ["dcts", "osc", "qp_md"]) + "\n\n" + claims_table(result["claims"])
-    if key == "exp5_payload_com":
-        return metrics_table(m, [("tool displacement at the end (x, y, z) [mm]", "tool_displacement_final", 1000),
-                                 ("max orientation error [°]", "task_error_max_deg", 1),
-                                 ("∫ acceleration energy", "acceleration_energy_integral", 1)], list(m))
-    raise KeyError(key)
+    labels = [label for label, value in m.items() if isinstance(value, dict)]  # the runs, not run-pair figures
+    parts = [metrics_table(m, SENSITIVITY_ROWS[key], labels)]
+    if result["claims"]:
+        parts.append(claims_table(result["claims"]))
+    return "\n\n".join(parts)
 
 
 def experiment_markdown(key: str, result: dict[str, Any]) -> str:
@@ -1213,7 +1208,7 @@ def main(argv: list[str] | None = None) -> int:
     args.out.mkdir(parents=True, exist_ok=True)
     for group, items in (("experiments", keys), ("sensitivity", sensitivity)):
         for key in items:
-            info = EXPERIMENTS.get(key) or SENSITIVITY[key]
+            info = study(key)
             print(f"{key}: {info['title']} …", flush=True)
             tic = time.perf_counter()
             runs = run_experiment(key, args.runtime, args.short)

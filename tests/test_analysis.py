@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 import pytest
+from reference import dynamics
 
 from dcts_spec.analysis.compare import markdown_table, table_rows
 from dcts_spec.analysis.metrics import SUMMARY_KEYS, json_ready, summarize
@@ -54,9 +55,7 @@ def case():
 def _numeric(robot, q, dq, frame="tool"):
     model = robot.model
     data = model.createData()
-    M = pin.crba(model, data, q)
-    M = np.triu(M) + np.triu(M, 1).T
-    g = pin.computeGeneralizedGravity(model, data, q)
+    M, _, g = dynamics(model, q, dq)
     fid = model.getFrameId(frame)
     J = pin.computeFrameJacobian(model, data, q, fid, pin.LOCAL_WORLD_ALIGNED)
     pin.forwardKinematics(model, data, q, dq, np.zeros(model.nv))

@@ -1,6 +1,6 @@
 """The generated C bundle: build, golden vectors, agreement with the Python runtime, safety, failures.
 
-The fast core (default) builds two bundles; the slow tests (-m slow) add sanitizers, valgrind,
+The fast core (default) builds a few bundles; the slow tests (-m slow) add sanitizers, valgrind,
 every formulation, DAQP from source, CMake, and the Cortex-M7 build on qemu.
 """
 
@@ -266,7 +266,7 @@ def test_torque_always_within_limits(built, three_levels_spec):
         s.tau_ext *= 3.0
         r = compiled.step(s.q, s.dq, s.tau_ext, s.ref)
         assert np.all(np.isfinite(r.tau)) and np.all(np.abs(r.tau) <= compiled.tau_max)
-        if r.status in (STATUS_INVALID_OUTPUT,):
+        if r.status == STATUS_INVALID_OUTPUT:
             assert not r.ddq.any()
 
 

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import subprocess
 import sys
 from pathlib import Path
 
@@ -11,7 +10,8 @@ import mujoco
 import numpy as np
 import pinocchio as pin
 import pytest
-
+from command_line import dcts
+from reference import dynamics
 from typer.testing import CliRunner
 
 from dcts_spec.analysis.run import analyze
@@ -27,7 +27,6 @@ from dcts_spec.sim.runtime import RuntimeUnavailable, make_runtime
 from dcts_spec.sim.scenario import TorqueProfile
 from dcts_spec.spec import SpecError, load_spec_text
 
-ROOT = Path(__file__).resolve().parents[1]
 HOME = "[0, 0.6, 0, -1.2, 0, 0.8, 0]"
 
 
@@ -153,7 +152,7 @@ def test_model_mismatch_scales_the_controllers_masses_only() -> None:
     g_ctrl = pin.computeGeneralizedGravity(controller, controller.createData(), q)
     np.testing.assert_allclose(g_ctrl, 1.3 * g_true, rtol=1e-12, atol=1e-12)
     np.testing.assert_allclose(mass_matrix(sim.mj_model, mujoco.MjData(sim.mj_model), q),
-                               _pin_mass(true, q), atol=1e-12)
+                               dynamics(true, q, np.zeros(7))[0], atol=1e-12)
     assert sim.runtime.robot.model is controller
     assert scaled_robot(sim.robot, 1.0) is sim.robot
     # At rest under gravity compensation by a heavier model, the estimator sees the excess.
@@ -162,16 +161,11 @@ def test_model_mismatch_scales_the_controllers_masses_only() -> None:
                                log.dq[0], log.ddq[0]) - log.tau[0], atol=1e-9)
 
 
-def _pin_mass(model: pin.Model, q: np.ndarray) -> np.ndarray:
-    M = pin.crba(model, model.createData(), q)
-    return np.triu(M) + np.triu(M, 1).T
-
-
 def test_mass_matrices_agree_along_a_simulated_trajectory() -> None:
     sim, log = simulate(spec_text(PUSH))
     data = mujoco.MjData(sim.mj_model)
     for q in log.q[::20]:
-        M = _pin_mass(sim.robot.model, q)
+        M = dynamics(sim.robot.model, q, np.zeros(7))[0]
         assert np.abs(mass_matrix(sim.mj_model, data, q) - M).max() < 1e-12 * np.abs(M).max()
 
 
@@ -253,17 +247,23 @@ def test_missing_scenario_and_unavailable_runtime() -> None:
         make_runtime(load_spec_text(text), "fortran")
 
 
-@pytest.mark.slow
-def test_c_runtime_runs_the_same_closed_loop_as_python(tmp_path: Path) -> None:
-    text = spec_text(PUSH)
+def run_c_like_python(text: str, **c_options) -> tuple[Simulation, object]:
+    """The spec run with the C runtime (skipped where it cannot be built) and with the Python
+    runtime: the same closed loop. Returns the C simulation and its log."""
     try:
-        c = prepare_simulation(load_spec_text(text), "c", work_dir=tmp_path, cache=False)
+        c = prepare_simulation(load_spec_text(text), "c", **c_options)
     except RuntimeUnavailable as error:
         pytest.skip(str(error))
     python = prepare_simulation(load_spec_text(text), "python")
     c_log, python_log = c.run(), python.run()
     np.testing.assert_allclose(c_log.tau, python_log.tau, atol=1e-6)
     np.testing.assert_allclose(c_log.q, python_log.q, atol=1e-9)
+    return c, c_log
+
+
+@pytest.mark.slow
+def test_c_runtime_runs_the_same_closed_loop_as_python(tmp_path: Path) -> None:
+    run_c_like_python(spec_text(PUSH), work_dir=tmp_path, cache=False)
 
 
 def test_c_runtime_simulates_model_mismatch_like_python(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
@@ -271,14 +271,7 @@ def test_c_runtime_simulates_model_mismatch_like_python(tmp_path: Path, monkeypa
     closed loop as the Python runtime, and the next run loads it from the cache."""
     monkeypatch.setenv("DCTS_CACHE_DIR", str(tmp_path / "cache"))
     text = spec_text(PUSH + "  model_mismatch: {mass_scale: 1.2}\n")
-    try:
-        c = prepare_simulation(load_spec_text(text), "c")
-    except RuntimeUnavailable as error:
-        pytest.skip(str(error))
-    python = prepare_simulation(load_spec_text(text), "python")
-    c_log, python_log = c.run(), python.run()
-    np.testing.assert_allclose(c_log.tau, python_log.tau, atol=1e-6)
-    np.testing.assert_allclose(c_log.q, python_log.q, atol=1e-9)
+    c, c_log = run_c_like_python(text)
     matched = prepare_simulation(load_spec_text(spec_text(PUSH)), "python").run()
     assert np.max(np.abs(matched.tau - c_log.tau)) > 0.1  # the mismatch shows
 
@@ -317,12 +310,6 @@ def test_no_cache_option_builds_in_a_temporary_directory(tmp_path: Path, monkeyp
 
 
 # -- the command line ---------------------------------------------------------------------------
-
-
-def dcts(*args: str, cwd: Path = ROOT) -> subprocess.CompletedProcess:
-    script = Path(sys.executable).with_name("dcts")
-    command = [str(script)] if script.is_file() else [sys.executable, "-c", "from dcts_spec.cli import main; main()"]
-    return subprocess.run([*command, *args], cwd=cwd, capture_output=True, text=True, timeout=300)
 
 
 def test_simulate_writes_a_complete_output_directory(tmp_path: Path) -> None:

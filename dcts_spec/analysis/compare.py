@@ -62,7 +62,7 @@ def markdown_table(runs: Sequence[RunResult]) -> str:
 def _format(value: Any) -> str:
     if value is None:
         return "–"
-    if isinstance(value, bool) or isinstance(value, int):
+    if isinstance(value, int):  # bool included
         return str(value)
     return f"{value:.4g}"
 
@@ -138,8 +138,7 @@ def velocity_ratio_overlay(runs: Sequence[RunResult]) -> Figure:
     figure = Figure(figsize=(9, 3.2), layout="constrained")
     ax = figure.subplots()
     for run in runs:
-        v_max = np.where(np.isfinite(run.robot.limits.v_max), run.robot.limits.v_max, np.inf)
-        ax.plot(run.log.time, np.max(np.abs(run.log.dq) / v_max, axis=1), lw=1.0, label=run.label)
+        ax.plot(run.log.time, np.max(np.abs(run.log.dq) / run.robot.limits.v_max, axis=1), lw=1.0, label=run.label)
     ax.axhline(1.0, color="#d62728", ls="--", lw=0.8)
     ax.set_xlabel("time [s]")
     ax.set_ylabel("max_j |q̇_j| / q̇_max,j")

@@ -31,6 +31,7 @@ from ..robot.model import Robot
 from ..sim.log import SimulationLog
 from .series import TimeSeries
 
+# The headline metrics: numbers (or per-task numbers) in every summary, finite for a completed run.
 SUMMARY_KEYS = (
     "max_joint_position_violation",
     "max_joint_velocity_violation",
@@ -51,7 +52,6 @@ def summarize(log: SimulationLog, series: TimeSeries, robot: Robot, priorities: 
     """The summary.json metrics of a run (see the module docstring for the definitions)."""
     lim = robot.limits
     velocity_excess = _excess(np.abs(log.dq), lim.v_max)
-    v_max = np.where(np.isfinite(lim.v_max), lim.v_max, np.inf)
     acceleration_errors = {str(p): _mean_norm(series.acceleration_errors[p]) for p in priorities}
     waypoints = log.waypoint_times
     summary: dict[str, Any] = {
@@ -61,7 +61,7 @@ def summarize(log: SimulationLog, series: TimeSeries, robot: Robot, priorities: 
         "diverged_at": log.diverged_at,
         "max_joint_position_violation": _peak(np.maximum(_excess(log.q, lim.q_max), _excess(-log.q, -lim.q_min))),
         "max_joint_velocity_violation": _peak(velocity_excess),
-        "max_joint_velocity_violation_ratio": _peak(velocity_excess / v_max),
+        "max_joint_velocity_violation_ratio": _peak(velocity_excess / lim.v_max),
         "max_torque_violation": _peak(_excess(np.abs(log.tau), lim.tau_max)),
         "max_cartesian_violation": _cartesian_violation(series, robot),
         "solver_failures": int(np.count_nonzero(log.status < 0)),

@@ -12,7 +12,7 @@ import numpy as np
 from ..robot.model import Robot
 from ..sim.log import SimulationLog
 from ..sim.runner import Simulation
-from ..tasks import CartesianTask, make_task
+from ..tasks import CartesianTask
 from .metrics import json_ready, summarize
 from .series import TimeSeries, evaluate
 
@@ -64,9 +64,8 @@ def analyze(sim: Simulation, log: SimulationLog, label: str | None = None) -> Ru
         "mass_scale": sim.scenario.mass_scale,
         **summarize(log, series, robot, priorities),
     }
-    tasks = [make_task(t, robot) for t in spec.tasks]
     result = RunResult(label or sim.formulation, robot, log, series, summary, priorities,
-                       {t.name: t.row_names for t in tasks})
+                       {t.name: t.row_names for t in sim.tasks})
     follower = sim.waypoints
     if follower is not None and isinstance(follower.task, CartesianTask):
         fields = [f for f, _, _ in follower.slices]

@@ -17,13 +17,16 @@ import tempfile
 import time
 from pathlib import Path
 
+import casadi
 import numpy as np
 import pinocchio
 
 from ..controller import STATUS_NAMES
+from ..spec import load_spec
 from ..tasks.cartesian import CartesianTask
-from .build import CACHE_DIR, _tail, compile_bundle, make_controller, run
+from .build import CACHE_DIR, _tail, compile_bundle, make_controller, run, section_size
 from .bundle import CodegenError, render, template, version
+from .layout import casadi_work_lengths
 from .loader import load_bundle
 from .states import State, StateSampler, trajectory_states
 
@@ -52,8 +55,7 @@ def build_c_harness(bundle: Path, manifest: dict, work: Path, optimization: list
     name = manifest["name"]
     values = {
         "name": name, "NAME": name.upper(), "VERSION": version(),
-        "SZ_ARG": max(manifest["casadi_work"]["sz_arg"], 1), "SZ_RES": max(manifest["casadi_work"]["sz_res"], 11),
-        "SZ_IW": max(manifest["casadi_work"]["sz_iw"], 1), "SZ_W": max(manifest["casadi_work"]["sz_w"], 1),
+        **{f"SZ_{key.upper()}": value for key, value in casadi_work_lengths(manifest["casadi_work"]).items()},
     }
     source = work / f"{name}_bench.c"
     source.write_text(render(template("bench.c.in"), values))
@@ -124,7 +126,7 @@ def pinocchio_reference(controller, states: list[State], work: Path) -> dict:
     model_file = work / "model.bin"
     model.saveToBinary(str(model_file))
     prefix = _cmeel_prefix()
-    eigen = Path(__import__("casadi").__file__).parent / "include" / "eigen3"
+    eigen = Path(casadi.__file__).parent / "include" / "eigen3"
     cxx = os.environ.get("CXX") or ("g++" if shutil.which("g++") else "c++")
     source = template("pinocchio_bench.cpp")
     # The harness takes ~20 s to compile: keep it, keyed by its source and Pinocchio's version.
@@ -207,45 +209,30 @@ def object_sizes(bundle: Path, manifest: dict, work: Path) -> dict:
     for stem in (name, f"{name}_casadi"):
         obj = bundle / "build" / f"{stem}.o"
         if obj.is_file():
-            sizes[f"{stem}.o"] = _section(obj, ".text")
+            sizes[f"{stem}.o"] = section_size(obj)
     lib = bundle / manifest["library"]
-    sizes[lib.name] = _section(lib, ".text")
+    sizes[lib.name] = section_size(lib)
     return sizes
 
 
-def _section(path: Path, section: str) -> int:
-    output = run(["size", "-A", str(path)], path.parent, "size")
-    for line in output.splitlines():
-        parts = line.split()
-        if parts and parts[0] == section:
-            return int(parts[1])
-    return 0
-
-
 def bench(spec_file: str | Path, formulation: str | None = None, states: int = 10000, python_states: int = 500,
-          callgrind_states: int = 300, seed: int = 0, keep: str | Path | None = None) -> dict:
+          callgrind_states: int = 300, seed: int = 0) -> dict:
     """Run the whole benchmark; returns a JSON-able dict (see `format_report`)."""
-    from ..spec import load_spec
-
     if states < 1:
         raise CodegenError("--states must be at least 1")
+    if python_states < 1:
+        raise CodegenError("--python-states must be at least 1")
     spec = load_spec(spec_file)
     controller = make_controller(spec, formulation)
     with tempfile.TemporaryDirectory(prefix="dcts-bench-") as tmp:
-        work = Path(keep) if keep else Path(tmp)
-        work.mkdir(parents=True, exist_ok=True)
+        work = Path(tmp)
         bundle = work / "bundle"
-        if bundle.exists():
-            shutil.rmtree(bundle)
-        report = compile_bundle(spec, bundle, formulation=formulation, golden_count=128)
-        manifest = report.manifest
-        compiled = load_bundle(bundle)
+        manifest = compile_bundle(spec, bundle, formulation=formulation).manifest
         t0 = time.perf_counter()
-        along = trajectory_states(controller, states, seed=seed, step=compiled.step)
-        sampler = StateSampler(controller, seed + 1)
-        independent = sampler.mixed(states, limit_fraction=0.15)
+        with load_bundle(bundle) as compiled:
+            along = trajectory_states(controller, states, seed=seed, step=compiled.step)
+        independent = StateSampler(controller, seed + 1).mixed(states, limit_fraction=0.15)
         generation_s = time.perf_counter() - t0
-        compiled.close()
 
         exe = build_c_harness(bundle, manifest, work)
         c_traj = run_c_harness(exe, along, work, "trajectory", warm=True)

@@ -22,12 +22,16 @@ import casadi
 from ..controller import Controller
 from ..robot.model import Robot
 from ..spec import Spec, load_spec
-from .bundle import GENERATOR, HEAP_SENTINEL, CodegenError, generate_sources
+from .bundle import GENERATOR, GOLDEN_COUNT, HEAP_SENTINEL, CodegenError, generate_sources
 from .model import model_record
 
 DAQP_SDIST_VERSION = "0.11.0"
 CACHE_DIR = Path(os.environ.get("DCTS_CACHE", Path.home() / ".cache" / "dcts"))
 TARGETS = ("host", "cortex-m7")
+# What the golden-vector test prints (templates/test.c.in): its summary line and, built with
+# heap counting, the heap calls of init and of the steps.
+GOLDEN_SUMMARY = "golden vectors"
+HEAP_LINE = re.compile(r"heap: init (\d+) calls (\d+) bytes; steps (\d+) calls")
 
 
 # -- toolchain -------------------------------------------------------------------------------------
@@ -226,13 +230,18 @@ def _controller_and_model(spec: Spec, formulation: str | None, robot: Robot | No
     return controller, model_record(model, report.robot, changes)
 
 
-def _text_size(path: Path) -> int:
+def section_size(path: Path, section: str = ".text") -> int:
+    """Bytes of one section of an object or library (`size -A`; 0 if it has none)."""
     output = run(["size", "-A", str(path)], path.parent, "size")
     for line in output.splitlines():
         parts = line.split()
-        if parts and parts[0] == ".text":
+        if parts and parts[0] == section:
             return int(parts[1])
     return 0
+
+
+def _golden_summary(output: str) -> str:
+    return next((line.strip() for line in output.splitlines() if GOLDEN_SUMMARY in line), "")
 
 
 def build_host(directory: Path, manifest: dict, cc: str | None = None) -> dict:
@@ -240,18 +249,15 @@ def build_host(directory: Path, manifest: dict, cc: str | None = None) -> dict:
     variables = {"CC": cc} if cc else {}
     make(directory, ["all"], "host build", variables)
     test = make(directory, ["check"], "golden-vector test", variables)
-    heap = make(directory, ["heapcheck"], "heap check", variables)
-    summary = next((line for line in test.splitlines() if "golden vectors" in line), "").strip()
-    heap_line = next((line for line in heap.splitlines() if line.startswith("heap:")), "")
-    found = re.search(r"init (\d+) calls (\d+) bytes; steps (\d+) calls", heap_line)
+    heap = HEAP_LINE.search(make(directory, ["heapcheck"], "heap check", variables))
     lib = directory / manifest["library"]
     return {
         "compiler": cc or os.environ.get("CC", "cc"),
-        "test_summary": summary,
-        "init_heap_calls": int(found.group(1)) if found else None,
-        "init_heap_bytes": int(found.group(2)) if found else None,
-        "step_heap_calls": int(found.group(3)) if found else None,
-        "text_bytes": _text_size(lib),
+        "test_summary": _golden_summary(test),
+        "init_heap_calls": int(heap.group(1)) if heap else None,
+        "init_heap_bytes": int(heap.group(2)) if heap else None,
+        "step_heap_calls": int(heap.group(3)) if heap else None,
+        "text_bytes": section_size(lib),
         "library_bytes": lib.stat().st_size,
     }
 
@@ -291,8 +297,8 @@ def build_firmware(directory: Path, manifest: dict, daqp_src: Path | None, qemu:
     }
     if qemu and shutil.which("qemu-system-arm"):
         output = make(directory, ["qemu-check"], "golden-vector test on qemu (cortex-m7)", variables, timeout=1200)
-        summary = next((line.strip() for line in output.splitlines() if "golden vectors" in line), "")
-        heap = re.search(r"heap: init (\d+) calls (\d+) bytes; steps (\d+) calls", output)
+        summary = _golden_summary(output)
+        heap = HEAP_LINE.search(output)
         if heap:
             result["heap_bytes"] = int(heap.group(2))
             result["step_heap_calls"] = int(heap.group(3))
@@ -357,7 +363,7 @@ def compile_bundle(
     cc: str | None = None,
     daqp_src: str | Path | None = None,
     warm_start: bool = False,
-    golden_count: int | None = None,
+    golden_count: int = GOLDEN_COUNT,
     qemu: bool = True,
     robot: Robot | None = None,
     model_changes: dict | None = None,
@@ -391,10 +397,9 @@ def compile_bundle(
         raise CodegenError(f"cannot write into {out_dir.parent}: {exc.strerror}") from None
     try:
         daqp_include, daqp_library = casadi_daqp() if controller.nx else ("", "")
-        kwargs = {} if golden_count is None else {"golden_count": golden_count}
-        sources = generate_sources(controller, tmp, spec_bytes=spec_bytes, warm_start=warm_start,
-                                   daqp_include=str(daqp_include), daqp_library=str(daqp_library), model=model,
-                                   **kwargs)
+        sources = generate_sources(controller, tmp, spec_bytes=spec_bytes, golden_count=golden_count,
+                                   warm_start=warm_start, daqp_include=str(daqp_include),
+                                   daqp_library=str(daqp_library), model=model)
         manifest = sources.manifest
         report = BuildReport(out_dir, manifest, build)
         if build:
@@ -409,8 +414,6 @@ def compile_bundle(
     except BaseException as exc:
         shutil.rmtree(tmp, ignore_errors=True)
         _remove_created(created)
-        if isinstance(exc, (CodegenError, KeyboardInterrupt)):
-            raise
         if isinstance(exc, OSError):
             raise CodegenError(f"writing the bundle failed: {exc}") from None
         raise

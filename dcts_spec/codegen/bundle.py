@@ -19,38 +19,34 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from .. import controller as runtime
-from ..controller import DATA_OUTPUTS, TORQUE_TOLERANCE, Controller
+from ..controller import DAQP_SETTINGS, DATA_OUTPUTS, RELAXED_TORQUE_TOLERANCE, TORQUE_TOLERANCE, Controller
+from ..formulations.qp import RELAXATION_WEIGHT
 from ..spec import Spec
-from .layout import workspace_struct
+from .layout import C_DATA_OUTPUTS, array_lengths, casadi_work_lengths, workspace_struct
 from .model import describe_changes, model_record
 from .states import State, golden_states
 
 GENERATOR = "dcts-spec"
-ITER_LIMIT = 200  # DAQP iterations per solve, unless the runtime's DAQP_SETTINGS say otherwise
+SOLVER_STORAGE_BYTES = 1024  # room for DAQP's structs in the workspace (checked at compile time)
+GOLDEN_COUNT = 128
 # DAQPSettings fields that exist in DAQP 0.5 and later (integers and floating point)
 DAQP_INT_SETTINGS = ("cycle_tol", "iter_limit")
 DAQP_FLOAT_SETTINGS = ("primal_tol", "dual_tol", "zero_tol", "pivot_tol", "progress_tol", "fval_bound", "eps_prox",
                        "eta_prox", "rho_soft", "rel_subopt", "abs_subopt")
-
-
-def relaxation_weight() -> float:
-    from ..formulations import qp as qp_module
-
-    return float(getattr(qp_module, "RELAXATION_WEIGHT", 1e3))
-
-
 # DAQP 0.5.1's defaults (the DAQP the Python runtime runs, inside casadi) that later versions
 # changed: pinned, so that any DAQP the bundle is built with solves the same QP the same way.
-# DAQP >= 0.6 defaults to eps_prox = -1e-6 (a proximal term switched on for ill-conditioned
-# Hessians), which cycles to the iteration limit on the DCTS QPs (Hessian diagonals from ~1e-2
-# to ~1e10) that 0.5.1 solves in a few iterations; and to pivot_tol = 1e-8.
+# DAQP >= 0.6 defaults to eps_prox = -1e-6 (proximal iterations for ill-conditioned Hessians)
+# and to pivot_tol = 1e-8.
 DAQP_PINNED_SETTINGS = {"eps_prox": 0.0, "pivot_tol": 1e-6}
 
 
+class CodegenError(Exception):
+    """The bundle could not be generated or built; the message says why."""
+
+
 def daqp_settings() -> dict:
-    """The DAQP settings of the Python runtime (so both solve the same QP the same way)."""
-    settings = {"iter_limit": ITER_LIMIT, **DAQP_PINNED_SETTINGS, **getattr(runtime, "DAQP_SETTINGS", {})}
+    """The bundle's DAQP settings: the pinned defaults, then the Python runtime's DAQP_SETTINGS."""
+    settings = {**DAQP_PINNED_SETTINGS, **DAQP_SETTINGS}
     unknown = [k for k in settings if k not in DAQP_INT_SETTINGS + DAQP_FLOAT_SETTINGS]
     if unknown:
         raise CodegenError(f"DAQP settings {unknown} are not known to the C generator")
@@ -63,14 +59,6 @@ def daqp_settings_code(settings: dict) -> str:
         literal = str(int(value)) if key in DAQP_INT_SETTINGS else c_double(value)
         lines.append(f"    s->{key} = {literal};")
     return "\n".join(lines)
-SOLVER_STORAGE_BYTES = 1024  # room for DAQP's structs in the workspace (checked at compile time)
-GOLDEN_COUNT = 128
-# Outputs of the generated qp_data, in the order the wrapper expects them.
-C_DATA_OUTPUTS = ("H", "f", "A_rowmajor", "bl", "bu", "tau0", "T", "ddq0", "Q", "s0", "S")
-
-
-class CodegenError(Exception):
-    """The bundle could not be generated or built; the message says why."""
 
 
 def version() -> str:
@@ -229,11 +217,10 @@ def compute_golden(controller: Controller, states: list[State]) -> Golden:
     return Golden(states, tau, ddq, scaling, x, nxs, status)
 
 
-def golden_sources(name: str, golden: Golden, sizes: dict[str, int]) -> tuple[str, str]:
+def golden_sources(name: str, golden: Golden, nref_alloc: int) -> tuple[str, str]:
     """The golden vectors as C arrays (exact hexadecimal literals): header and source."""
     big = name.upper()
     count = len(golden.states)
-    nref_alloc = sizes["nref_alloc"]
 
     def table(rows) -> str:
         return ",\n".join("    {" + c_array(r) + "}" for r in rows)
@@ -422,10 +409,7 @@ def generate_sources(
     n, nx, na = controller.n, controller.nx, controller.na
     nref, levels = controller.ref_size, len(controller.priorities)
     qp = controller.law.qp
-    nr = 0 if qp is None else int(getattr(qp, "relaxable_rows", 0))
-    if qp is not None and getattr(qp, "relaxation", None) is not None:
-        raise CodegenError("this QP relaxes its limits with a single variable (QP.relaxation); the C generator "
-                           "implements the relaxed QP of formulations.qp.relaxed_qp")
+    nr = 0 if qp is None else qp.relaxable_rows
     solver_bytes = SOLVER_STORAGE_BYTES * (2 if nr else 1)
     tau_max = np.asarray(controller.tau_max, dtype=float)
     damping = np.asarray(controller.fallback_damping, dtype=float)
@@ -436,11 +420,8 @@ def generate_sources(
 
     settings = daqp_settings()
     work = generate_casadi(controller, name, directory)
-    sizes = {
-        "nref_alloc": max(nref, 1), "nx_alloc": max(nx, 1), "na_alloc": max(na, 1),
-        "nc_alloc": max(nx + na, 1), "nlevels_alloc": max(levels, 1),
-        "nx2_alloc": nx + nr if nr else 1, "na2_alloc": na + nr if nr else 1, "nc2_alloc": nx + na + 2 * nr if nr else 1,
-    }
+    length = array_lengths(nx, na, levels, nref, nr)
+    work_length = casadi_work_lengths(work)
     layout_text, layout_macros = _ref_layout_text(controller, big)
     workspace_bytes = ctypes.sizeof(workspace_struct(n, nref, nx, na, levels, work, solver_bytes, nr))
     if nx:
@@ -478,16 +459,9 @@ def generate_sources(
         "NX": nx,
         "NA": na,
         "NLEVELS": levels,
-        "NREF_ALLOC": sizes["nref_alloc"],
-        "NX_ALLOC": sizes["nx_alloc"],
-        "NA_ALLOC": sizes["na_alloc"],
-        "NC_ALLOC": sizes["nc_alloc"],
-        "NLEVELS_ALLOC": sizes["nlevels_alloc"],
+        **{f"{key.upper()}_ALLOC": value for key, value in length.items()},
         "NR": nr,
-        "NX2_ALLOC": sizes["nx2_alloc"],
-        "NA2_ALLOC": sizes["na2_alloc"],
-        "NC2_ALLOC": sizes["nc2_alloc"],
-        "RELAXATION_WEIGHT": c_double(relaxation_weight()),
+        "RELAXATION_WEIGHT": c_double(RELAXATION_WEIGHT),
         "PERIOD": repr(float(spec.controller.period)),
         "ITER_LIMIT": int(settings["iter_limit"]),
         "DAMPING": _fmt_list(damping),
@@ -497,14 +471,11 @@ def generate_sources(
         "INIT_SHORT": init_short,
         "DAQP_NOTE": daqp_note,
         "WORKSPACE_BYTES_HOST": workspace_bytes,
-        "SZ_ARG": max(work["sz_arg"], 1),
-        "SZ_RES": max(work["sz_res"], 11),
-        "SZ_IW": max(work["sz_iw"], 1),
-        "SZ_W": max(work["sz_w"], 1),
+        **{f"SZ_{key.upper()}": value for key, value in work_length.items()},
         "SOLVER_BYTES": solver_bytes,
         "ENFORCES_TORQUE_LIMITS": int(bool(controller.law.enforces_torque_limits)),
         "TORQUE_TOLERANCE": c_double(TORQUE_TOLERANCE),
-        "RELAXED_TORQUE_TOLERANCE": c_double(getattr(runtime, "RELAXED_TORQUE_TOLERANCE", TORQUE_TOLERANCE)),
+        "RELAXED_TORQUE_TOLERANCE": c_double(RELAXED_TORQUE_TOLERANCE),
         "DAQP_SETTINGS": daqp_settings_code(settings),
         "TAU_MAX_ARRAY": c_array(tau_max),
         "DAMPING_ARRAY": c_array(damping),
@@ -528,7 +499,7 @@ def generate_sources(
     }
     states = golden_states(controller, golden_count)
     golden = compute_golden(controller, states)
-    files[f"{name}_golden.h"], files[f"{name}_golden.c"] = golden_sources(name, golden, sizes)
+    files[f"{name}_golden.h"], files[f"{name}_golden.c"] = golden_sources(name, golden, length["nref"])
     for rel, text in files.items():
         path = directory / rel
         path.parent.mkdir(parents=True, exist_ok=True)
@@ -560,14 +531,14 @@ def generate_sources(
         "ref_layout": [r.to_dict() for r in controller.ref_layout],
         "variables": list(qp.variables) if qp is not None else [],
         "relaxable_rows": nr,
-        "relaxation_weight": relaxation_weight(),
+        "relaxation_weight": RELAXATION_WEIGHT,
         "enforces_torque_limits": bool(controller.law.enforces_torque_limits),
         "tau_max": [float(v) for v in tau_max],
         "fallback_damping": [float(v) for v in damping],
         "period": float(spec.controller.period),
         "daqp_settings": settings,
         "torque_tolerance": TORQUE_TOLERANCE,
-        "relaxed_torque_tolerance": getattr(runtime, "RELAXED_TORQUE_TOLERANCE", TORQUE_TOLERANCE),
+        "relaxed_torque_tolerance": RELAXED_TORQUE_TOLERANCE,
         "warm_start": bool(warm_start),
         "qp_data_instructions": work["instructions"],
         "casadi_work": {k: work[k] for k in ("sz_arg", "sz_res", "sz_iw", "sz_w")},

@@ -189,7 +189,6 @@ class BundleCache:
         self.directory = Path(directory).expanduser() if directory is not None else default_cache_dir()
         self.max_entries = max_entries
         self.last_hit: bool | None = None
-        self.last_entry: Path | None = None
 
     def __repr__(self) -> str:
         return f"BundleCache({str(self.directory)!r})"
@@ -271,31 +270,18 @@ class BundleCache:
             raise
 
     def load(self, spec: Spec | str | Path, formulation: str | None = None, robot: Robot | None = None,
-             model_changes: dict | None = None, rebuild: bool = False) -> CompiledController:
+             model_changes: dict | None = None) -> CompiledController:
         """The C controller of the spec, from the cache or built into it (then kept)."""
         spec = spec if isinstance(spec, Spec) else load_spec(spec)
         key = self.key(spec, formulation, robot, model_changes)
         entry = self.directory / key.entry
-        self.last_entry = entry
-        if rebuild and entry.exists():
-            self._discard(entry)
-        try:
-            found = None if rebuild else self.lookup(key)
-        except CodegenError:  # loaded into this process and broken: build privately (see the module doc)
-            self.last_hit = False
-            return self._private_build(spec, key, robot, model_changes)
+        found = self._reuse(spec, key, robot, model_changes)
         if found is not None:
-            self.last_hit = True
             return found
         self.directory.mkdir(parents=True, exist_ok=True)
         with self._lock(key):
-            try:
-                found = self.lookup(key, repair=True)  # built by another process while we waited?
-            except CodegenError:
-                self.last_hit = False
-                return self._private_build(spec, key, robot, model_changes)
+            found = self._reuse(spec, key, robot, model_changes, repair=True)  # built by another process meanwhile?
             if found is not None:
-                self.last_hit = True
                 return found
             self.last_hit = False
             staging = Path(tempfile.mkdtemp(prefix=f".tmp-{key.entry}-", dir=self.directory))
@@ -306,6 +292,19 @@ class BundleCache:
                 shutil.rmtree(staging, ignore_errors=True)
         self._prune(keep=entry)
         return self._open(entry)
+
+    def _reuse(self, spec: Spec, key: CacheKey, robot: Robot | None, model_changes: dict | None,
+               repair: bool = False) -> CompiledController | None:
+        """The entry's controller (a hit); a private build if the entry is broken but loaded into
+        this process (see the module doc); None if there is no complete entry."""
+        try:
+            found = self.lookup(key, repair)
+        except CodegenError:
+            self.last_hit = False
+            return self._private_build(spec, key, robot, model_changes)
+        if found is not None:
+            self.last_hit = True
+        return found
 
     # -- building --------------------------------------------------------------------------------
 
@@ -390,8 +389,3 @@ class BundleCache:
         for entry in entries[self.max_entries:]:
             if entry != keep and now - last_use(entry) > RECENT_SECONDS:
                 self._discard(entry)
-
-    def clear(self) -> None:
-        """Remove every entry (bundles already loaded keep working)."""
-        for entry in self.entries():
-            self._discard(entry)

@@ -52,7 +52,6 @@ class CompiledController:
         library = self.directory / m["library"]
         if not library.is_file():
             raise CodegenError(f"{library} not found: build the bundle first (make)")
-        self.library_path = library
         self._lib = ctypes.CDLL(str(library))
         self._bind()
         levels = len(self.priorities)
@@ -160,10 +159,7 @@ class CompiledController:
         elif type(ref) is np.ndarray and ref.shape == self._ref_shape:
             self._ref_in[...] = ref
         else:
-            ref = np.asarray(ref, dtype=float).reshape(-1)
-            if ref.size != self.ref_size:
-                raise ValueError(f"ref must have {self.ref_size} values, got {ref.size}")
-            self._ref_in[...] = ref
+            self._ref_in[...] = self._vector(ref, "ref", self.ref_size)
         return self._step(*args)
 
     def step(self, q, dq, tau_ext=None, ref=None) -> StepResult:
@@ -171,8 +167,8 @@ class CompiledController:
 
         The arrays of the result are new (later steps do not change them)."""
         status = self._call(q, dq, tau_ext, ref)
-        x = self._x_out[: self._info.nx].copy() if (status >= 0 or status == STATUS_INVALID_OUTPUT) else np.zeros(0)
-        return StepResult(self._tau.copy(), self._ddq_out.copy(), self._scaling_out.copy(), int(status), x)
+        return StepResult(self._tau.copy(), self._ddq_out.copy(), self._scaling_out.copy(), int(status),
+                          self._solution(status))
 
     def step_into(self, q, dq, tau_ext, ref, tau: np.ndarray, ddq: np.ndarray | None = None,
                   scaling: np.ndarray | None = None) -> int:
@@ -189,8 +185,13 @@ class CompiledController:
 
     def last_x(self) -> np.ndarray:
         """The QP solution of the last step, as `StepResult.x` (a copy)."""
-        status = self._info.status
-        return self._x_out[: self._info.nx].copy() if (status >= 0 or status == STATUS_INVALID_OUTPUT) else np.zeros(0)
+        return self._solution(self._info.status)
+
+    def _solution(self, status: int) -> np.ndarray:
+        """x as the Python runtime reports it: kept on success and on an invalid output, else empty."""
+        if status >= 0 or status == STATUS_INVALID_OUTPUT:
+            return self._x_out[: self._info.nx].copy()
+        return np.zeros(0)
 
     def last_info(self) -> dict:
         """Solver statistics of the last step: solves, DAQP iterations and exit flag."""

@@ -71,12 +71,12 @@ def total_mass(robot: Robot) -> float:
 def model_record(robot: Robot, spec_robot: Robot, changes: dict | None = None) -> dict:
     """The manifest's `model` entry: the model's digest, whether it is the spec's own robot,
     and what was changed (e.g. {"mass_scale": 1.2}) when it is not."""
-    digest, spec_digest_ = model_digest(robot), model_digest(spec_robot)
-    modified = digest != spec_digest_
+    digest, spec_model_digest = model_digest(robot), model_digest(spec_robot)
+    modified = digest != spec_model_digest
     record = {
         "sha256": digest,
         "modified": modified,
-        "spec_model_sha256": spec_digest_,
+        "spec_model_sha256": spec_model_digest,
         "total_mass": total_mass(robot),
     }
     if modified:  # (changes given for the spec's own model, e.g. mass_scale 1, change nothing)

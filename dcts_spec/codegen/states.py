@@ -85,11 +85,9 @@ class StateSampler:
                 ref[sl] = pin.rpy.matrixToRpy(placement.rotation) + self.rng.normal(0.0, 0.05, 3)
             elif r.field == "q" and isinstance(task, JointTask):
                 ref[sl] = q[task.joint_indices] + self.rng.normal(0.0, 0.1, r.size)
-            elif r.field == "velocity":
-                ref[sl] = self.rng.normal(0.0, 0.05, r.size)
             elif r.field == "acceleration":
                 ref[sl] = self.rng.normal(0.0, 0.5, r.size)
-            else:
+            else:  # velocity feed-forward
                 ref[sl] = self.rng.normal(0.0, 0.05, r.size)
         return ref
 
@@ -175,8 +173,7 @@ def golden_states(controller: Controller, count: int = 120, seed: int = 0) -> li
     # lost its factor's storage on two diagonal Hessians in a row, and crashed on the next QP).
     repeated = most_diagonal_state(controller, states)
     if repeated is not None:
-        states[1:1] = [repeated, State(repeated.q.copy(), repeated.dq.copy(), repeated.tau_ext.copy(),
-                                       repeated.ref.copy(), repeated.kind)]
+        states[1:1] = [repeated, State(*(v.copy() for v in repeated.as_tuple()), repeated.kind)]
     return states
 
 
@@ -200,9 +197,9 @@ def trajectory_states(controller: Controller, count: int, seed: int = 0, episode
                       step=None) -> list[State]:
     """States along closed-loop motions: the robot's forward dynamics under the controller's torque
     and the external torque, integrated over `controller.spec.controller.period` (semi-implicit
-    Euler) from random starts, with external
-    torque pulses and, for run-time references, jumps. `step(q, dq, tau_ext, ref)` returns the
-    StepResult (default: the Python runtime, which is slow; pass a compiled controller's step).
+    Euler) from random starts, with external torque pulses and, for run-time references, jumps.
+    `step(q, dq, tau_ext, ref)` returns the StepResult (default: the Python runtime, which is
+    slow; pass a compiled controller's step).
     """
     sampler = StateSampler(controller, seed)
     rng = sampler.rng

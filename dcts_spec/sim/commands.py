@@ -122,7 +122,7 @@ def _load(file: Path, options: RunOptions, formulations: list[str]) -> Spec:
         raise CommandError(f"unknown runtime {options.runtime!r}; choose one of {', '.join(RUNTIMES)}")
     unknown = [f for f in formulations if f not in FORMULATIONS]
     if unknown:
-        raise CommandError(f"unknown formulation {unknown[0]!r}; choose from {', '.join(FORMULATIONS)}")
+        raise CommandError(f"unknown formulation {unknown[0]!r}; choose one of {', '.join(FORMULATIONS)}")
     if options.duration is not None and options.duration <= 0:
         raise CommandError(f"--duration must be positive, got {options.duration:g}")
     return load_spec(file)
@@ -137,11 +137,11 @@ def _output_directory(out: Path | None, default: Path) -> Path:
 
 
 def _prepare(spec: Spec, options: RunOptions, formulation: str | None, stack: ExitStack) -> Simulation:
-    if options.runtime == "c" and options.cache:
-        return prepare_simulation(spec, options.runtime, formulation, options.duration, cache=True)
-    # Without the cache, the C bundle lives as long as the run that loads it.
-    work_dir = stack.enter_context(tempfile.TemporaryDirectory(prefix="dcts-runtime-"))
-    return prepare_simulation(spec, options.runtime, formulation, options.duration, work_dir, cache=False)
+    work_dir = None
+    if options.runtime == "c" and not options.cache:
+        # Without the cache, the C bundle lives as long as the run that loads it.
+        work_dir = stack.enter_context(tempfile.TemporaryDirectory(prefix="dcts-runtime-"))
+    return prepare_simulation(spec, options.runtime, formulation, options.duration, work_dir, cache=work_dir is None)
 
 
 def _run(sim: Simulation, options: RunOptions, hooks: list[Hook]) -> RunResult:

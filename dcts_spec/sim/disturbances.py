@@ -19,6 +19,10 @@ class _Push:
     torque: np.ndarray
     active: np.ndarray  # per substep
 
+    def world_point(self, data: mujoco.MjData) -> np.ndarray:
+        """Where the force acts, in world coordinates, at the current kinematics."""
+        return data.xpos[self.body] + data.xmat[self.body].reshape(3, 3) @ self.point
+
 
 class Disturbances:
     """Applies the scenario's disturbances before each MuJoCo substep.
@@ -60,8 +64,7 @@ class Disturbances:
         mujoco.mj_comPos(mj_model, data)
         for push in self._pushes:
             if push.active[substep]:
-                point = data.xpos[push.body] + data.xmat[push.body].reshape(3, 3) @ push.point
-                lever = point - data.xipos[push.body]
+                lever = push.world_point(data) - data.xipos[push.body]
                 data.xfrc_applied[push.body, :3] += push.force
                 data.xfrc_applied[push.body, 3:] += push.torque + np.cross(lever, push.force)
 
@@ -72,5 +75,4 @@ class Disturbances:
             return
         for push in self._pushes:
             if push.active[substep]:
-                point = data.xpos[push.body] + data.xmat[push.body].reshape(3, 3) @ push.point
-                mujoco.mj_applyFT(mj_model, data, push.force, push.torque, point, push.body, out)
+                mujoco.mj_applyFT(mj_model, data, push.force, push.torque, push.world_point(data), push.body, out)

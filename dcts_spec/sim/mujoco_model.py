@@ -59,7 +59,7 @@ class Payload:
     inertia: tuple[float, float, float] | None = None
 
 
-def build_mujoco_spec(
+def build_mujoco_model(
     model: pin.Model,
     *,
     timestep: float = 0.001,
@@ -67,10 +67,34 @@ def build_mujoco_spec(
     payloads: Sequence[Payload] = (),
     geometry: pin.GeometryModel | None = None,
     scenery: bool = False,
-) -> mujoco.MjSpec:
-    """MuJoCo spec of a fixed-base Pinocchio model, to extend (floor, cameras) before compiling.
+) -> mujoco.MjModel:
+    """MuJoCo model of a fixed-base Pinocchio model with revolute and prismatic joints.
 
-    See :func:`build_mujoco_model` for what the spec contains.
+    - One body per Pinocchio joint, named after the joint's child link, placed by
+      ``model.jointPlacements`` and carrying ``model.inertias``; ``qpos``/``qvel`` follow
+      Pinocchio's ``idx_q``/``idx_v``.
+    - No armature, damping, friction loss or joint limits: limits are the controller's job.
+    - One ``motor`` actuator per joint, named like the joint, gear 1 and no control clamp:
+      ``data.ctrl`` is the joint torque (or force).
+    - One site per Pinocchio ``BODY`` or ``OP_FRAME`` frame, named like the frame.
+    - ``payloads`` are welded bodies that Pinocchio does not know about.
+    - ``geometry`` (a Pinocchio collision or visual model) gives the geoms: primitives and
+      STL/OBJ meshes, other meshes (``.dae``) are skipped; without it, capsules join
+      consecutive joint origins. Geoms never collide (contype = conaffinity = 0).
+    - ``scenery`` adds what a viewer or a video needs and the dynamics ignore: a
+      non-colliding checkered floor at z = 0, a light and a sky.
+
+    Args:
+        model: Fixed-base Pinocchio model.
+        timestep: Simulation time step (s).
+        integrator: ``"euler"``, ``"rk4"``, ``"implicit"`` or ``"implicitfast"``.
+        payloads: Masses added to the MuJoCo model only.
+        geometry: Geometry to display; mesh paths as resolved by Pinocchio's loaders.
+        scenery: Add a floor, a light and a sky for rendering.
+
+    Raises:
+        ValueError: On a joint that is neither revolute nor prismatic, an unknown
+            integrator or payload frame, or a joint order MuJoCo cannot reproduce.
     """
     spec = mujoco.MjSpec()
     spec.modelname = model.name
@@ -120,49 +144,6 @@ def build_mujoco_spec(
         _add_geometry(spec, geometry, bodies)
     if scenery:
         _add_scenery(spec)
-    return spec
-
-
-def build_mujoco_model(
-    model: pin.Model,
-    *,
-    timestep: float = 0.001,
-    integrator: str = "implicitfast",
-    payloads: Sequence[Payload] = (),
-    geometry: pin.GeometryModel | None = None,
-    scenery: bool = False,
-) -> mujoco.MjModel:
-    """MuJoCo model of a fixed-base Pinocchio model with revolute and prismatic joints.
-
-    - One body per Pinocchio joint, named after the joint's child link, placed by
-      ``model.jointPlacements`` and carrying ``model.inertias``; ``qpos``/``qvel`` follow
-      Pinocchio's ``idx_q``/``idx_v``.
-    - No armature, damping, friction loss or joint limits: limits are the controller's job.
-    - One ``motor`` actuator per joint, named like the joint, gear 1 and no control clamp:
-      ``data.ctrl`` is the joint torque (or force).
-    - One site per Pinocchio ``BODY`` or ``OP_FRAME`` frame, named like the frame.
-    - ``payloads`` are welded bodies that Pinocchio does not know about.
-    - ``geometry`` (a Pinocchio collision or visual model) gives the geoms: primitives and
-      STL/OBJ meshes, other meshes (``.dae``) are skipped; without it, capsules join
-      consecutive joint origins. Geoms never collide (contype = conaffinity = 0).
-    - ``scenery`` adds what a viewer or a video needs and the dynamics ignore: a
-      non-colliding checkered floor at z = 0, a light and a sky.
-
-    Args:
-        model: Fixed-base Pinocchio model.
-        timestep: Simulation time step (s).
-        integrator: ``"euler"``, ``"rk4"``, ``"implicit"`` or ``"implicitfast"``.
-        payloads: Masses added to the MuJoCo model only.
-        geometry: Geometry to display; mesh paths as resolved by Pinocchio's loaders.
-        scenery: Add a floor, a light and a sky for rendering.
-
-    Raises:
-        ValueError: On a joint that is neither revolute nor prismatic, an unknown
-            integrator or payload frame, or a joint order MuJoCo cannot reproduce.
-    """
-    spec = build_mujoco_spec(
-        model, timestep=timestep, integrator=integrator, payloads=payloads, geometry=geometry, scenery=scenery
-    )
     mj_model = spec.compile()
     _check_joint_order(model, mj_model)
     return mj_model

@@ -64,6 +64,12 @@ class WaypointFollower:
     def finished(self) -> bool:
         return self.index >= len(self.points)
 
+    def restart(self, ref: np.ndarray) -> None:
+        """Back to the first point, none reached yet; the first point goes into `ref`."""
+        self.index = 0
+        self.reached_at[:] = np.nan
+        self.write(ref)
+
     def write(self, ref: np.ndarray) -> None:
         """Put the current point into `ref`."""
         point = self.points[min(self.index, len(self.points) - 1)]

@@ -52,11 +52,11 @@ class Simulation:
         self.mj_model = build_mujoco_model(robot.model, timestep=scenario.timestep, integrator=scenario.integrator,
                                            payloads=scenario.payloads, scenery=True)
         self.mj_data = mujoco.MjData(self.mj_model)
-        tasks = [make_task(t, robot) for t in spec.tasks]
-        self.initial_ref = initial_references(tasks, runtime.ref_layout, robot, scenario.q0)
+        self.tasks = [make_task(t, robot) for t in spec.tasks]
+        self.initial_ref = initial_references(self.tasks, runtime.ref_layout, robot, scenario.q0)
         self.waypoints: WaypointFollower | None = None
         if scenario.waypoints is not None:
-            task = next(t for t in tasks if t.name == scenario.waypoints.task)
+            task = next(t for t in self.tasks if t.name == scenario.waypoints.task)
             self.waypoints = WaypointFollower(scenario.waypoints, task, runtime.ref_layout, robot)
 
     def reset(self) -> None:
@@ -78,9 +78,7 @@ class Simulation:
         follower = self.waypoints
         ref = self.initial_ref.copy()
         if follower is not None:
-            follower.index = 0
-            follower.reached_at[:] = np.nan
-            follower.write(ref)
+            follower.restart(ref)
         self.reset()
         # Locals: attribute look-ups cost as much as the small numpy operations here.
         q, dq, ddq, tau, ddq_cmd = log.q, log.dq, log.ddq, log.tau, log.ddq_commanded

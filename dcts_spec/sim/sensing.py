@@ -21,9 +21,10 @@ class TorqueSensor:
     so it contains the pushes, the payloads and the mass mismatch. With the controller's model
     equal to the simulated one, one substep per period and an Euler-type integrator it equals the
     true τ_ext of step k−1 exactly (the semi-implicit step makes a_{k−1} the acceleration at step
-    k−1); with rk4 (the default) a_{k−1} is the period's mean acceleration and the estimate is
-    within ~1e-5 relative. At k = 0 nothing has been observed yet and it is 0. `ignored`: always 0. `noisy`: ideal plus seeded
-    Gaussian noise and a constant bias.
+    k−1); with rk4 (the default) a_{k−1} is the period's mean acceleration, and the estimate is
+    off by ~5e-5 of the torque (the tests' push). At k = 0 nothing has been observed yet: it is 0.
+
+    `ignored`: always 0. `noisy`: ideal plus seeded Gaussian noise and a constant bias.
     """
 
     def __init__(self, sensing: ExternalTorqueSensing, model: pin.Model, steps: int):
