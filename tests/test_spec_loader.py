@@ -287,3 +287,17 @@ def test_helpers() -> None:
     assert d.to_dict() == {"severity": "error", "file": "f.yaml", "line": 3, "column": 5, "path": "a[1]", "message": "bad"}
     assert str(SpecError([d, Diagnostic("meh", "warning")])) == "f.yaml:3:5: error: a[1]: bad\n<spec>: warning: meh"
     assert SpecError([d, Diagnostic("meh", "warning")]).errors == [d]
+
+
+def test_closed_sets_match_what_the_compiler_offers():
+    """The spec's allowed formulations and built-in robots are the ones the compiler has."""
+    import typing
+
+    from dcts_spec.formulations import FORMULATIONS
+    from dcts_spec.robot.builtin import BUILTIN_ROBOTS
+    from dcts_spec.spec.controller import Formulation
+    from dcts_spec.spec.robot import RobotSpec
+
+    assert set(typing.get_args(Formulation)) == set(FORMULATIONS)
+    robots = typing.get_args(RobotSpec.model_fields["model"].annotation)
+    assert {r for arg in robots for r in typing.get_args(arg)} == set(BUILTIN_ROBOTS)
