@@ -45,7 +45,8 @@ def validate(
     check: Annotated[bool, typer.Option("--check", help="also compile every formulation and report QP sizes")] = False,
 ) -> None:
     """Check spec files and summarize them; exit 1 if any has an error."""
-    from .validate import compile_check, validate_file
+    from .controller import compile_check
+    from .validate import validate_file
 
     results, failed = [], False
     for file in files:

@@ -1,26 +1,31 @@
-"""The compiled controller: a CasADi function for the QP data, a QP solver, and a safe fallback.
+"""The compiled controller: a CasADi function for the QP data, the lexicographic solve, a safe fallback.
 
-    qp_data(q, dq, tau_ext, ref) → H, f, A, lba, uba, lbx, ubx, tau0, T, ddq0, Q, s0, S
+    qp_data(q, dq, tau_ext, ref) → H, f, A, lba, uba, lbx, ubx, tau0, T, ddq0, Q, s0, S, p0, P
 
-τ = tau0 + T x, q̈ = ddq0 + Q x (commanded: M⁻¹(τ − ν − g)), s = s0 + S x, where x solves the QP
-(empty for closed-form formulations). The generated C code runs the very same function.
+τ = tau0 + T x, q̈ = ddq0 + Q x (commanded: M⁻¹(τ − ν − g)), s = s0 + S x, and p0 + P x the task
+acceleration of an over-constrained lowest level (empty if there is none), where x solves the
+lexicographic QP (`solve/`; empty for closed-form formulations). The generated C code runs the very
+same function and the same DAQP.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import casadi as ca
 import numpy as np
 
 from .formulations import FORMULATIONS, ControlLaw, ControlProblem, build_problem
-from .formulations.qp import relaxed_qp
+from .formulations.fallback import fallback_torque
+from .formulations.qp import BOUNDS, HARD, TASK
 from .robot.model import Robot
+from .solve import BOUND_TOLERANCE, DAQP_EXIT_INFEASIBLE, check_bounds, solve_lexicographic
 from .spec import Spec, load_spec
 from .tasks import ReferenceInput
+from .validate import ValidationReport, validate_spec
 
-STATUS_OK = 0
+STATUS_OK = 0  # every torque, joint and Cartesian bound holds (checked after the solve)
 STATUS_LIMITS_RELAXED = 1  # joint/Cartesian bounds violated as little as the torque limits allow
 STATUS_NONFINITE_INPUT = -1  # fallback torque
 STATUS_SOLVER_FAILED = -2  # fallback torque
@@ -33,13 +38,10 @@ STATUS_NAMES = {
     STATUS_INVALID_OUTPUT: "invalid output",
 }
 TORQUE_TOLERANCE = 1e-5  # relative to max(1, τ_max): what solver tolerances may leave (then clipped)
-# With the limits relaxed the QP data holds huge bounds (a velocity excess asks for ~1e3 rad/s² in
-# one period), and the solver's tolerance, relative to them, leaves a larger overshoot to clip.
-RELAXED_TORQUE_TOLERANCE = 1e-3
-# DAQP settings shared by the Python runtime and the generated C: a tighter primal tolerance than
-# DAQP's 1e-6 so that bounds hold to 1e-6 in their own units, and a bounded iteration count.
-DAQP_SETTINGS = {"primal_tol": 1e-8, "iter_limit": 200}
-DATA_OUTPUTS = ("H", "f", "A", "lba", "uba", "lbx", "ubx", "tau0", "T", "ddq0", "Q", "s0", "S")
+# A row is active (binding) at the solution when it is this close to its bound, relative to
+# max(1, |bound|): then an over-constrained lowest level's scaling needs the solve without bounds.
+ACTIVE_TOLERANCE = 1e-9
+DATA_OUTPUTS = ("H", "f", "A", "lba", "uba", "lbx", "ubx", "tau0", "T", "ddq0", "Q", "s0", "S", "p0", "P")
 
 
 @dataclass
@@ -51,6 +53,7 @@ class StepResult:
     scaling: np.ndarray  # one task scaling factor per priority level, highest first, in [0, 1] (1 = not scaled)
     status: int  # STATUS_* code; negative means the fallback torque was applied
     x: np.ndarray  # the QP solution, in scaled variables (empty for closed forms)
+    relaxed: list[str] = field(default_factory=list)  # bounds that gave way (status 1), worst first
 
     @property
     def ok(self) -> bool:
@@ -61,8 +64,8 @@ def data_function(problem: ControlProblem, law: ControlLaw, name: str = "qp_data
     """The CasADi function that maps the controller inputs to the QP data and output maps.
 
     The QP variables are scaled so that the Hessian has a unit diagonal, x = D x̃ with
-    D = diag(H)^(-1/2): the same problem, but priority weights spanning 1e3…1e9 no longer make
-    its condition number explode, which some DAQP versions (and qpOASES) cannot stand.
+    D = diag(H)^(-1/2): the same problem (rows keep their units), better conditioned for DAQP's
+    factorization (the mass matrix's diagonal spans ~4 decades).
     """
     nx = law.nx
     qp = law.qp
@@ -80,7 +83,10 @@ def data_function(problem: ControlProblem, law: ControlLaw, name: str = "qp_data
     torque = law.torque
     ddq0 = problem.commanded_acceleration(torque.offset)
     Q = ca.mtimes(problem.mass_matrix_inverse, torque_matrix) if nx else ca.SX(problem.n, 0)
-    outputs = [H, f, A, lba, uba, lbx, ubx, torque.offset, torque_matrix, ddq0, Q, law.scaling.offset, scaling_matrix]
+    P, p0 = ca.SX(0, nx), ca.SX(0, 1)
+    if law.least_squares_task is not None:
+        P, p0 = ca.mtimes(law.least_squares_task[0], D), law.least_squares_task[1]
+    outputs = [H, f, A, lba, uba, lbx, ubx, torque.offset, torque_matrix, ddq0, Q, law.scaling.offset, scaling_matrix, p0, P]
     inputs = [problem.q, problem.dq, problem.tau_ext, problem.ref]
     return ca.Function(
         name,
@@ -92,27 +98,28 @@ def data_function(problem: ControlProblem, law: ControlLaw, name: str = "qp_data
     )
 
 
+def least_squares_scaling(achieved: np.ndarray, unbounded: np.ndarray) -> float:
+    """Scaling reported for an over-constrained lowest level: 1 − the deviation of its task
+    acceleration from what it gets when the bounds are ignored, relative to the latter, in [0, 1]."""
+    return float(np.clip(1.0 - np.linalg.norm(achieved - unbounded) / (np.linalg.norm(unbounded) + 1e-9), 0.0, 1.0))
+
+
 class Controller:
     """A spec compiled for one formulation; `step` runs it from Python."""
 
-    def __init__(self, spec: Spec, robot: Robot, formulation: str | None = None, solver: str | None = None):
+    def __init__(self, spec: Spec, robot: Robot, formulation: str | None = None):
         self.spec = spec
         self.robot = robot
         self.formulation = formulation or spec.controller.formulation
-        self.solver = solver or spec.controller.solver
         if self.formulation not in FORMULATIONS:
             raise ValueError(f"unknown formulation {self.formulation!r}; choose one of {', '.join(FORMULATIONS)}")
-        if self.solver not in ("daqp", "qpoases"):
-            raise ValueError(f"unknown solver {self.solver!r}; choose daqp or qpoases")
         self.problem = build_problem(spec, robot)
         self.law = FORMULATIONS[self.formulation](self.problem)
         self.data = data_function(self.problem, self.law)
-        self.gravity_function = ca.Function("gravity", [self.problem.q], [self.problem.gravity], ["q"], ["g"])
+        fallback = fallback_torque(self.problem)
+        self.fallback_function = ca.Function("fallback", [self.problem.q, self.problem.dq], [fallback], ["q", "dq"], ["tau"])
         self.tau_max = np.asarray(robot.limits.tau_max, dtype=float)
-        self.fallback_damping = self.problem.vector("fallback_damping")
-        self._last_gravity = np.zeros(self.n)
-        self._solver = self._make_solver(self.nx, self.na) if self.nx else None
-        self._relaxed_solver: ca.Function | None = None
+        self._last_q: np.ndarray | None = None
 
     # -- sizes and layout ------------------------------------------------------------------------
 
@@ -127,6 +134,16 @@ class Controller:
     @property
     def na(self) -> int:
         return 0 if self.law.qp is None else self.law.qp.na
+
+    @property
+    def break_points(self) -> list[int]:
+        """DAQP's break points of the lexicographic QP (empty for closed forms)."""
+        return [] if self.law.qp is None else self.law.qp.break_points()
+
+    @property
+    def bound_names(self) -> list[str]:
+        """The joint and Cartesian bounds, in the order of the bound rows."""
+        return list(self.problem.acceleration_rows.names)
 
     @property
     def ref_layout(self) -> list[ReferenceInput]:
@@ -144,38 +161,86 @@ class Controller:
 
     # -- running ---------------------------------------------------------------------------------
 
-    def _make_solver(self, nx: int, na: int) -> ca.Function:
-        qp = {"h": ca.Sparsity.dense(nx, nx), "a": ca.Sparsity.dense(na, nx)}
-        if self.solver == "daqp":
-            return ca.conic("dcts_qp", "daqp", qp, {"error_on_fail": False, "daqp": dict(DAQP_SETTINGS)})
-        options = {"error_on_fail": False, "printLevel": "none", "sparse": False, "enableRegularisation": False}
-        return ca.conic("dcts_qp", "qpoases", qp, options)
+    def _bounds(self, data: dict[str, np.ndarray], free: tuple[str, ...] = ()) -> tuple[np.ndarray, np.ndarray]:
+        """DAQP's lower and upper bounds (variables, then rows); the rows of the levels of kinds
+        `free` unbounded."""
+        qp = self.law.qp
+        lower = np.concatenate([data["lbx"].ravel(), data["lba"].ravel()])
+        upper = np.concatenate([data["ubx"].ravel(), data["uba"].ravel()])
+        for kind in free:
+            rows = qp.rows_of(kind)
+            lower[self.nx + rows.start : self.nx + rows.stop] = -np.inf
+            upper[self.nx + rows.start : self.nx + rows.stop] = np.inf
+        return lower, upper
 
-    def _solve(self, data: dict[str, np.ndarray]) -> tuple[np.ndarray | None, int]:
-        """Solve the QP; if it is infeasible, solve it again with the limits relaxed."""
-        assert self._solver is not None and self.law.qp is not None
-        names = ("H", "f", "A", "lba", "uba", "lbx", "ubx")
-        H, f, A, lba, uba, lbx, ubx = (data[k] if k in ("H", "A") else data[k].ravel() for k in names)
-        sol = self._solver(h=H, g=f, a=A, lba=lba, uba=uba, lbx=lbx, ubx=ubx)
-        if self._solver.stats()["success"]:
-            return np.array(sol["x"]).ravel(), STATUS_OK
-        rows = self.law.qp.relaxable_rows
-        if not rows:
-            return None, STATUS_SOLVER_FAILED
-        H2, f2, A2, lba2, uba2, lbx2, ubx2 = relaxed_qp(H, f, A, lba, uba, lbx, ubx, rows)
-        if self._relaxed_solver is None:
-            self._relaxed_solver = self._make_solver(*A2.shape[::-1])
-        sol = self._relaxed_solver(h=H2, g=f2, a=A2, lba=lba2, uba=uba2, lbx=lbx2, ubx=ubx2)
-        if self._relaxed_solver.stats()["success"]:
-            return np.array(sol["x"]).ravel()[: self.nx], STATUS_LIMITS_RELAXED
-        return None, STATUS_SOLVER_FAILED
+    def _solve(self, data: dict[str, np.ndarray]) -> tuple[np.ndarray | None, bool]:
+        """The lexicographic QP's solution (None if DAQP failed), and whether the joint/Cartesian
+        bounds had to be relaxed (the torque limits cannot hold them all).
+
+        DAQP meets a hierarchy's hard level only to ~1e-5 relative in ill-conditioned states (its
+        hierarchical mode does not refine the primal solution); a hard row crossed beyond the
+        tolerances is then projected back: min ½‖x − x_h‖²_H over the hard rows, one ordinary QP,
+        which DAQP solves exactly."""
+        qp = self.law.qp
+        H, f, A = data["H"], data["f"].ravel(), data["A"]
+        lower, upper = self._bounds(data)
+        relaxed = False
+        x, flag, _ = solve_lexicographic(H, f, A, lower, upper, qp.break_points())
+        if x is None and flag == DAQP_EXIT_INFEASIBLE:
+            relaxed = True
+            x, flag, _ = solve_lexicographic(H, f, A, lower, upper, qp.break_points(relaxed=True))
+        if x is None:
+            return None, relaxed
+        hard = (HARD,) if relaxed else (HARD, BOUNDS)
+        if not self._holds(data, x, hard):
+            lower, upper = self._bounds(data, free=tuple(k for k in (BOUNDS, TASK) if k not in hard))
+            x, _, _ = solve_lexicographic(H, -H @ x, A, lower, upper, [lower.size])
+        return x, relaxed
+
+    def _holds(self, data: dict[str, np.ndarray], x: np.ndarray, kinds: tuple[str, ...]) -> bool:
+        """Do the variable bounds and the rows of the levels of `kinds` hold at x (within the tolerances)?"""
+        qp = self.law.qp
+        lbx, ubx = data["lbx"].ravel(), data["ubx"].ravel()
+        if np.any(x < lbx - BOUND_TOLERANCE) or np.any(x > ubx + BOUND_TOLERANCE):
+            return False
+        for kind in kinds:
+            rows = qp.rows_of(kind)
+            value = data["A"][rows.start : rows.stop] @ x
+            lo, hi = data["lba"].ravel()[rows.start : rows.stop], data["uba"].ravel()[rows.start : rows.stop]
+            crossed = np.maximum(lo - value, value - hi)
+            if np.any(crossed > BOUND_TOLERANCE * np.maximum(1.0, np.abs(np.where(value < lo, lo, hi)))):
+                return False
+        return True
+
+    def _binding(self, data: dict[str, np.ndarray], x: np.ndarray) -> bool:
+        """Does a torque limit or a joint/Cartesian bound bind at x?"""
+        qp = self.law.qp
+        end = qp.rows_of(BOUNDS).stop if len(qp.rows_of(BOUNDS)) else qp.rows_of(HARD).stop
+        value = data["A"][:end] @ x
+        lo, hi = data["lba"].ravel()[:end], data["uba"].ravel()[:end]
+        return bool(np.any(np.minimum(np.abs(value - lo), np.abs(hi - value)) <=
+                           ACTIVE_TOLERANCE * np.maximum(1.0, np.minimum(np.abs(lo), np.abs(hi)))))
+
+    def _least_squares_scaling(self, data: dict[str, np.ndarray], x: np.ndarray) -> float:
+        if not self._binding(data, x):
+            return 1.0
+        lower, upper = self._bounds(data, free=(HARD, BOUNDS))
+        free, _, _ = solve_lexicographic(data["H"], data["f"].ravel(), data["A"], lower, upper, self.law.qp.break_points())
+        if free is None:
+            return 0.0
+        P, p0 = data["P"], data["p0"].ravel()
+        return least_squares_scaling(P @ x + p0, P @ free + p0)
 
     def fallback_torque(self, q: np.ndarray, dq: np.ndarray) -> np.ndarray:
-        """τ = g(q) − D q̇ clipped to the torque limits; non-finite parts are left out."""
+        """The stable damping of `formulations/fallback.py` at q (else the last finite q), clipped to
+        the torque limits; non-finite velocities count as 0."""
         if np.all(np.isfinite(q)):
-            self._last_gravity = np.array(self.gravity_function(q)).ravel()
-        damping = -self.fallback_damping * np.where(np.isfinite(dq), dq, 0.0)
-        return np.clip(self._last_gravity + damping, -self.tau_max, self.tau_max)
+            self._last_q = q
+        dq = np.where(np.isfinite(dq), dq, 0.0)
+        if self._last_q is None:
+            return np.zeros(self.n)
+        tau = np.array(self.fallback_function(self._last_q, dq)).ravel()
+        return np.clip(np.where(np.isfinite(tau), tau, 0.0), -self.tau_max, self.tau_max)
 
     def evaluate_data(self, q, dq, tau_ext=None, ref=None) -> dict[str, np.ndarray]:
         """The QP data and output maps at a state (for tests and tools)."""
@@ -206,31 +271,58 @@ class Controller:
         q, dq, tau_ext, ref = self._inputs(q, dq, tau_ext, ref)
         if not all(np.all(np.isfinite(v)) for v in (q, dq, tau_ext, ref)):
             return self._fallback(q, dq, STATUS_NONFINITE_INPUT, np.zeros(0))
+        self._last_q = q
         data = self._evaluate(q, dq, tau_ext, ref)
-        status = STATUS_OK
         x = np.zeros(0)
         if self.nx:
-            solution, status = self._solve(data)
+            finite = all(np.all(np.isfinite(data[k])) for k in ("H", "f", "A")) and not any(
+                np.any(np.isnan(data[k])) for k in ("lba", "uba", "lbx", "ubx"))
+            solution, _ = self._solve(data) if finite else (None, False)
             if solution is None:
-                return self._fallback(q, dq, status, np.zeros(0))
+                return self._fallback(q, dq, STATUS_SOLVER_FAILED, np.zeros(0))
             x = solution
         tau = data["tau0"].ravel() + data["T"] @ x
-        relative = RELAXED_TORQUE_TOLERANCE if status == STATUS_LIMITS_RELAXED else TORQUE_TOLERANCE
-        tolerance = relative * np.maximum(1.0, np.where(np.isfinite(self.tau_max), self.tau_max, 1.0))
+        tolerance = TORQUE_TOLERANCE * np.maximum(1.0, np.where(np.isfinite(self.tau_max), self.tau_max, 1.0))
         out_of_limits = self.law.enforces_torque_limits and np.any(np.abs(tau) > self.tau_max + tolerance)
         if not np.all(np.isfinite(tau)) or out_of_limits:
             return self._fallback(q, dq, STATUS_INVALID_OUTPUT, x)
-        self._last_gravity = np.array(self.gravity_function(q)).ravel()
+        status, relaxed = STATUS_OK, []
+        if self.nx:
+            check = check_bounds(self.law.qp, data["A"], data["lba"].ravel(), data["uba"].ravel(), x)
+            if not check.holds:
+                status, relaxed = STATUS_LIMITS_RELAXED, [self.bound_names[i] for i in check.violated]
         ddq = data["ddq0"].ravel() + data["Q"] @ x
         scaling = np.clip(data["s0"].ravel() + data["S"] @ x, 0.0, 1.0)
-        return StepResult(np.clip(tau, -self.tau_max, self.tau_max), ddq, scaling, status, x)
+        if self.law.least_squares_task is not None:
+            scaling[-1] = self._least_squares_scaling(data, x)
+        return StepResult(np.clip(tau, -self.tau_max, self.tau_max), ddq, scaling, status, x, relaxed)
 
 
-def build_controller(spec: Spec | str | Path, formulation: str | None = None, solver: str | None = None) -> Controller:
+def build_controller(spec: Spec | str | Path, formulation: str | None = None) -> Controller:
     """Validate a spec (object or file) and compile it into a Python-runnable controller."""
-    from .validate import validate_spec
-
     if not isinstance(spec, Spec):
         spec = load_spec(spec)
     report = validate_spec(spec)
-    return Controller(spec, report.robot, formulation, solver)
+    return Controller(spec, report.robot, formulation)
+
+
+def compile_check(report: ValidationReport) -> dict[str, dict]:
+    """Compile the spec with every formulation: QP size, expression size, or why it fails."""
+    out: dict[str, dict] = {}
+    for name in FORMULATIONS:
+        try:
+            controller = Controller(report.spec, report.robot, name)
+        except ValueError as error:
+            out[name] = {"ok": False, "error": str(error), "summary": f"cannot compile: {error}"}
+            continue
+        kind = f"QP {controller.nx} variables × {controller.na} constraints" if controller.nx else "closed form"
+        notes = "; ".join(controller.law.notes)
+        out[name] = {
+            "ok": True,
+            "variables": controller.nx,
+            "constraints": controller.na,
+            "instructions": controller.data.n_instructions(),
+            "notes": controller.law.notes,
+            "summary": f"{kind}, {controller.data.n_instructions()} operations for the QP data" + (f" ({notes})" if notes else ""),
+        }
+    return out

@@ -283,28 +283,3 @@ def _numeric_jacobian(task: CartesianTask | JointTask, model: pin.Model, data: p
         J = pin.getFrameJacobian(model, data, model.getFrameId(task.frame), pin.LOCAL_WORLD_ALIGNED)
         return J[task.rows, :]
     return task.selection_matrix()
-
-
-def compile_check(report: ValidationReport) -> dict[str, dict]:
-    """Compile the spec with every formulation: QP size, expression size, or why it fails."""
-    from .controller import Controller
-    from .formulations import FORMULATIONS
-
-    out: dict[str, dict] = {}
-    for name in FORMULATIONS:
-        try:
-            controller = Controller(report.spec, report.robot, name)
-        except ValueError as error:
-            out[name] = {"ok": False, "error": str(error), "summary": f"cannot compile: {error}"}
-            continue
-        kind = f"QP {controller.nx} variables × {controller.na} constraints" if controller.nx else "closed form"
-        notes = "; ".join(controller.law.notes)
-        out[name] = {
-            "ok": True,
-            "variables": controller.nx,
-            "constraints": controller.na,
-            "instructions": controller.data.n_instructions(),
-            "notes": controller.law.notes,
-            "summary": f"{kind}, {controller.data.n_instructions()} operations for the QP data" + (f" ({notes})" if notes else ""),
-        }
-    return out

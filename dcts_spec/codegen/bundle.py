@@ -19,8 +19,9 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from ..controller import DAQP_SETTINGS, DATA_OUTPUTS, RELAXED_TORQUE_TOLERANCE, TORQUE_TOLERANCE, Controller
-from ..formulations.qp import RELAXATION_WEIGHT
+from ..controller import DATA_OUTPUTS, TORQUE_TOLERANCE, Controller
+from ..solve import DAQP_SETTINGS
+RELAXATION_WEIGHT = RELAXED_TORQUE_TOLERANCE = 0  # TODO codegen
 from ..spec import Spec
 from .layout import C_DATA_OUTPUTS, array_lengths, casadi_work_lengths, workspace_struct
 from .model import describe_changes, model_record

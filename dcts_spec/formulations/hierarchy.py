@@ -79,29 +79,23 @@ def recursive_hierarchy(
     return Affine(offset, matrix), N
 
 
-def least_squares_objective(
-    level: Level, acceleration: ca.SX, basis: ca.SX, mass: ca.SX, weight: float, normalized: bool = False
-) -> tuple[ca.SX, ca.SX]:
-    """Hessian and gradient in z of  w‖J(a + B z) + J̇q̇ − ẍ_d‖² + ε w ½‖B z‖²_M.
+def least_squares_objective(level: Level, acceleration: Affine, mass: ca.SX) -> tuple[ca.SX, ca.SX]:
+    """Hessian and gradient in x of  ½‖J a(x) + J̇q̇ − ẍ_d‖² + ½ε‖a(x) − a(0)‖²_M  (a(x) affine).
 
-    B spans the freedom left (a basis, or a projector N). The minimizer is the closed-form step
-    with a pseudo-inverse, a + J̄⁺(ẍ_d − J̇q̇ − J a), also when J B has lost rank: the task is met
-    in least squares, the rest at minimum energy. A damped task-space inverse
+    Over the freedom a(x) leaves, the minimizer is the closed-form step with a pseudo-inverse,
+    a + J̄⁺(ẍ_d − J̇q̇ − J a), also where J restricted to that freedom has lost rank: the task is
+    met in least squares, the rest at minimum energy. A damped task-space inverse
     (J N M⁻¹ NᵀJᵀ + λ²I)⁻¹ would be hopelessly ill-conditioned there instead.
-    `normalized` divides w by ‖ẍ_d − J̇q̇ − J a‖² + 1, as dcts does for δ: against higher levels in
-    a QP, a level far from its target must not weigh more because its error is large.
     """
-    JB = ca.mtimes(level.jacobian, basis)
-    residual = level.target - level.bias - ca.mtimes(level.jacobian, acceleration)
-    if normalized:
-        weight = weight / (ca.sumsqr(residual) + 1.0)
-    hessian = 2.0 * weight * ca.mtimes(JB.T, JB) + LEAST_SQUARES_ENERGY_RATIO * weight * ca.mtimes([basis.T, mass, basis])
-    return hessian, -2.0 * weight * ca.mtimes(JB.T, residual)
+    G = ca.mtimes(level.jacobian, acceleration.matrix)
+    residual = ca.mtimes(level.jacobian, acceleration.offset) + level.bias - level.target
+    energy = ca.mtimes([acceleration.matrix.T, mass, acceleration.matrix])
+    return ca.mtimes(G.T, G) + LEAST_SQUARES_ENERGY_RATIO * energy, ca.mtimes(G.T, residual)
 
 
 def least_squares_step(level: Level, acceleration: ca.SX, N: ca.SX, mass: ca.SX) -> ca.SX:
     """The acceleration after a level solved in least squares within range(N)."""
-    hessian, gradient = least_squares_objective(level, acceleration, N, mass, 1.0)
+    hessian, gradient = least_squares_objective(level, Affine(acceleration, N), mass)
     # z and N z are redundant along null(N); γ‖(I − N)z‖² fixes those components without biasing N z.
     complement = ca.SX.eye(N.shape[0]) - N
     z = cholesky_solve(cholesky(hessian + NULL_SPACE_REGULARIZATION * ca.mtimes(complement.T, complement)), -gradient)

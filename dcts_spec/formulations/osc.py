@@ -11,17 +11,19 @@ from __future__ import annotations
 
 import casadi as ca
 
-from .dcts import hierarchy_qp
+from .hierarchy import least_squares_step, level_structure, recursive_hierarchy
 from .problem import ControlProblem
 from .qp import Affine, ControlLaw
 
 
 def osc(problem: ControlProblem) -> ControlLaw:
-    hqp = hierarchy_qp(problem)
-    acceleration = hqp.nominal_acceleration
-    z = hqp.z_columns
-    if z and hqp.structure.least_squares_last:
-        acceleration = acceleration + ca.mtimes(hqp.acceleration.matrix[:, z], hqp.unconstrained_z)
+    structure = level_structure(problem)
+    exact = problem.levels[: structure.exact_levels]
+    commands = [Affine(level.target, ca.SX(level.dim, 0)) for level in exact]
+    hierarchy, N = recursive_hierarchy(problem, commands, 0)
+    acceleration = hierarchy.offset
+    if structure.least_squares_last:
+        acceleration = least_squares_step(problem.levels[-1], acceleration, N, problem.mass_matrix)
     torque = Affine.constant(problem.torque(acceleration), 0)
     scaling = Affine.constant(ca.SX.ones(len(problem.levels)), 0)
     return ControlLaw(torque, scaling, enforces_torque_limits=False)

@@ -1,19 +1,31 @@
-"""What a formulation produces: τ, a and s as affine maps of the QP variable x, and the QP itself."""
+"""What a formulation produces: τ, a and s as affine maps of the QP variable x, and the QP itself.
+
+Every QP here is *lexicographic*: its rows come in levels, highest priority first, and each level
+is solved as well as it can be without touching the levels above (`solve/lexicographic.py`):
+
+    level 0   the variable bounds and the torque limits                       hard
+    level 1   joint and Cartesian bounds, shaped into acceleration bounds     hard, or least violation
+    level 2…  the formulation's own levels (dcts: one or two per priority)     least squares
+    last      ½ xᵀHx + fᵀx over whatever freedom is left
+
+The joint and Cartesian bounds are first solved as hard rows with the torque limits (the usual
+case: they hold exactly). When the torque limits cannot hold them all, the QP is solved again with
+them as their own level below the torque limits: each bound is violated as little as they allow,
+and no task can buy a larger violation (status "limits relaxed").
+"""
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 
 import casadi as ca
-import numpy as np
 
 from .problem import ControlProblem
 
 INF = float("inf")
-# Penalty of each bound's relaxation slack, relative to the largest curvature of the objective:
-# the slacks only exist in the second solve, when the limits and the torque bounds cannot all
-# hold, where they must dominate every task weight.
-RELAXATION_WEIGHT = 1e3
+HARD = "hard"
+BOUNDS = "bounds"
+TASK = "task"
 
 
 @dataclass
@@ -29,13 +41,17 @@ class Affine:
 
 
 @dataclass
-class QP:
-    """min ½ xᵀHx + fᵀx  s.t.  lbx ≤ x ≤ ubx,  lba ≤ A x ≤ uba.
+class RowLevel:
+    """A block of consecutive rows of A that share one priority."""
 
-    The last `relaxable_rows` rows are the joint/Cartesian acceleration bounds. If the QP is
-    infeasible (the torque limits cannot hold them all), it is solved again with each of those
-    bounds widened by its own slack, heavily penalized (`relaxed_qp`).
-    """
+    name: str
+    kind: str  # HARD, BOUNDS or TASK
+    rows: int
+
+
+@dataclass
+class QP:
+    """min ½ xᵀHx + fᵀx  s.t.  lbx ≤ x ≤ ubx,  lba ≤ A x ≤ uba, row levels solved lexicographically."""
 
     hessian: ca.SX
     gradient: ca.SX
@@ -45,7 +61,7 @@ class QP:
     lbx: ca.SX
     ubx: ca.SX
     variables: list[str]
-    relaxable_rows: int = 0
+    levels: list[RowLevel]
 
     @property
     def nx(self) -> int:
@@ -54,6 +70,34 @@ class QP:
     @property
     def na(self) -> int:
         return int(self.constraints.shape[0])
+
+    def rows_of(self, kind: str) -> range:
+        """The rows of A in the levels of one kind (they are consecutive)."""
+        start = 0
+        first = last = None
+        for level in self.levels:
+            if level.kind == kind:
+                first = start if first is None else first
+                last = start + level.rows
+            start += level.rows
+        return range(0, 0) if first is None else range(first, last)
+
+    def break_points(self, relaxed: bool = False) -> list[int]:
+        """DAQP's break points: the end of each non-empty level, counting the nx variable bounds
+        (DAQP's simple bounds) as the first rows of the hard level.
+
+        The joint/Cartesian bounds are hard, with the torque limits, unless `relaxed`: then they are
+        the level below them, violated as little as the torque limits allow. (DAQP meets a hard
+        level exactly; a soft level only to within its proximal iterations, ~1e-5 relative.)"""
+        points, end = [], self.nx
+        for level in self.levels:
+            if level.kind == BOUNDS and not relaxed:
+                points[-1] += level.rows
+                continue
+            end = (points[-1] if points else end) + level.rows
+            if level.rows or not points:
+                points.append(end)
+        return points
 
 
 @dataclass
@@ -66,10 +110,23 @@ class ControlLaw:
     notes: list[str] = field(default_factory=list)
     # False for formulations that ignore the torque limits: their torque is clipped naively.
     enforces_torque_limits: bool = True
+    # An over-constrained lowest level (least squares, no scaling variable): its task
+    # acceleration as (matrix, offset) in x; its scaling is computed after the solve (controller).
+    least_squares_task: tuple[ca.SX, ca.SX] | None = None
 
     @property
     def nx(self) -> int:
         return 0 if self.qp is None else self.qp.nx
+
+
+@dataclass
+class TaskRows:
+    """One task level of a lexicographic QP: lower ≤ matrix · x ≤ upper in the least-squares sense."""
+
+    name: str
+    matrix: ca.SX
+    lower: ca.SX
+    upper: ca.SX
 
 
 def with_limits(
@@ -80,8 +137,9 @@ def with_limits(
     lbx: list[float],
     ubx: list[float],
     variables: list[str],
+    tasks: list[TaskRows] = (),
 ) -> tuple[QP, Affine]:
-    """Add the torque bounds and the joint/Cartesian acceleration bounds to an objective in x.
+    """The lexicographic QP: torque limits (hard), joint/Cartesian bounds, then `tasks`, then ½xᵀHx + fᵀx.
 
     Returns the QP and the torque as an affine map of x.
     """
@@ -89,39 +147,10 @@ def with_limits(
     rows = problem.acceleration_rows
     R_c = ca.mtimes(rows.matrix, acceleration.offset) + rows.offset
     tau_max = ca.DM(problem.torque_max)
-    A = ca.vertcat(torque.matrix, ca.mtimes(rows.matrix, acceleration.matrix))
-    lba = ca.vertcat(-tau_max - torque.offset, rows.lower - R_c)
-    uba = ca.vertcat(tau_max - torque.offset, rows.upper - R_c)
-    qp = QP(hessian, gradient, A, lba, uba, ca.vertcat(*lbx), ca.vertcat(*ubx), variables, len(rows))
+    A = ca.vertcat(torque.matrix, ca.mtimes(rows.matrix, acceleration.matrix), *[t.matrix for t in tasks])
+    lba = ca.vertcat(-tau_max - torque.offset, rows.lower - R_c, *[t.lower for t in tasks])
+    uba = ca.vertcat(tau_max - torque.offset, rows.upper - R_c, *[t.upper for t in tasks])
+    levels = [RowLevel("torque limits", HARD, problem.n), RowLevel("joint and Cartesian bounds", BOUNDS, len(rows))]
+    levels += [RowLevel(t.name, TASK, int(t.matrix.shape[0])) for t in tasks]
+    qp = QP(hessian, gradient, A, lba, uba, ca.vertcat(*lbx), ca.vertcat(*ubx), variables, levels)
     return qp, torque
-
-
-def relaxed_qp(
-    H: np.ndarray,
-    f: np.ndarray,
-    A: np.ndarray,
-    lba: np.ndarray,
-    uba: np.ndarray,
-    lbx: np.ndarray,
-    ubx: np.ndarray,
-    relaxable_rows: int,
-) -> tuple[np.ndarray, ...]:
-    """The QP data with each of the last `relaxable_rows` rows widened by a slack sᵣ ≥ 0.
-
-    Variables (x, s); objective ½xᵀHx + fᵀx + ½ρ‖s‖² with ρ = RELAXATION_WEIGHT · max|H_ii|;
-    a relaxable row lo ≤ aᵀx ≤ hi becomes aᵀx − sᵣ ≤ hi and aᵀx + sᵣ ≥ lo, so every bound is
-    violated only as much as the torque limits force it to be. NumPy in and out (the generated
-    C does the same on its arrays).
-    """
-    nx, r = H.shape[0], relaxable_rows
-    fixed = A.shape[0] - r
-    rho = RELAXATION_WEIGHT * max(1.0, float(np.max(np.abs(np.diag(H))))) if nx else RELAXATION_WEIGHT
-    H2 = np.zeros((nx + r, nx + r))
-    H2[:nx, :nx] = H
-    H2[nx:, nx:] = rho * np.eye(r)
-    slack = np.eye(r)
-    A2 = np.block([[A[:fixed], np.zeros((fixed, r))], [A[fixed:], -slack], [A[fixed:], slack]])
-    inf = np.full(r, INF)
-    lba2 = np.concatenate([lba[:fixed], -inf, lba[fixed:]])
-    uba2 = np.concatenate([uba[:fixed], uba[fixed:], inf])
-    return H2, np.concatenate([f, np.zeros(r)]), A2, lba2, uba2, np.concatenate([lbx, np.zeros(r)]), np.concatenate([ubx, inf])

@@ -9,12 +9,12 @@ from pydantic import Field
 from .types import Number, NumberList, ScalarOrVector, StrictModel
 
 Formulation = Literal["dcts", "osc", "projector", "qp_mt", "qp_md"]
-Solver = Literal["daqp", "qpoases"]
+Solver = Literal["daqp"]
 
 
 class ControllerSpec(StrictModel):
     formulation: Formulation = "dcts"
-    solver: Solver = Field("daqp", description="QP solver; qpoases is the offline reference (Python only)")
+    solver: Solver = Field("daqp", description="QP solver: DAQP in its hierarchical (lexicographic) mode, the same in Python and in the generated C")
     period: Number = Field(0.001, gt=0, le=0.1, description="control period in s")
     external_torque: Literal["measured", "ignored"] = Field(
         "measured", description="use the measured external joint torque in tasks and limits"
