@@ -147,8 +147,6 @@ def compile_(
     daqp_src: Annotated[Optional[Path], typer.Option(help="DAQP C sources (csrc/) for the firmware; default: "
                                                      "PyPI's source distribution, cached")] = None,
     qemu: Annotated[bool, typer.Option("--qemu/--no-qemu", help="cortex-m7: run the golden test on qemu")] = True,
-    warm_start: Annotated[bool, typer.Option("--warm-start", help="warm start DAQP from the previous step by "
-                                             "default (same optimum up to tolerances)")] = False,
     as_json: Annotated[bool, typer.Option("--json", help="print the bundle's manifest")] = False,
 ) -> None:
     """Generate the C bundle of a spec (QP data, DAQP solve, header, build files, golden test) and build it."""
@@ -156,7 +154,7 @@ def compile_(
 
     with _exit_1_on_errors():
         report = compile_bundle(file, output, formulation=formulation, build=not no_build, target=target,
-                                daqp_src=daqp_src, qemu=qemu, warm_start=warm_start)
+                                daqp_src=daqp_src, qemu=qemu)
     typer.echo(json.dumps(report.manifest, indent=2) if as_json else "\n".join(report.lines()))
 
 

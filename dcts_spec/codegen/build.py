@@ -17,15 +17,12 @@ import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import casadi
-
 from ..controller import Controller
 from ..robot.model import Robot
 from ..spec import Spec, load_spec
-from .bundle import GENERATOR, GOLDEN_COUNT, HEAP_SENTINEL, CodegenError, generate_sources
+from .bundle import DAQP_VERSION, GENERATOR, GOLDEN_COUNT, HEAP_SENTINEL, CodegenError, generate_sources
 from .model import model_record
 
-DAQP_SDIST_VERSION = "0.11.0"
 CACHE_DIR = Path(os.environ.get("DCTS_CACHE", Path.home() / ".cache" / "dcts"))
 TARGETS = ("host", "cortex-m7")
 # What the golden-vector test prints (templates/test.c.in): its summary line and, built with
@@ -37,19 +34,7 @@ HEAP_LINE = re.compile(r"heap: init (\d+) calls (\d+) bytes; steps (\d+) calls")
 # -- toolchain -------------------------------------------------------------------------------------
 
 
-def casadi_daqp() -> tuple[Path, Path]:
-    """Headers and static library of the DAQP inside the casadi wheel (DAQP 0.5.x).
-
-    The archive's solver objects are position independent (only codegen.c.o, which the
-    controller does not use, is not), so they link into a shared library."""
-    root = Path(casadi.__file__).parent
-    include, library = root / "include" / "daqp", root / "libdaqpstat.a"
-    if not (include / "api.h").is_file() or not library.is_file():
-        raise CodegenError(f"DAQP not found in the casadi package at {root} (expected include/daqp and libdaqpstat.a)")
-    return include, library
-
-
-def daqp_sources(cache: Path | None = None, version: str = DAQP_SDIST_VERSION) -> Path:
+def daqp_sources(cache: Path | None = None, version: str = DAQP_VERSION) -> Path:
     """DAQP's C sources (csrc/ with include/ and src/) from its PyPI source distribution,
     downloaded once into the cache with pip (never into the project)."""
     cache = (cache or CACHE_DIR) / "daqp"
@@ -65,7 +50,8 @@ def daqp_sources(cache: Path | None = None, version: str = DAQP_SDIST_VERSION) -
         if done.returncode != 0 or not archive.is_file():
             raise CodegenError(f"could not download DAQP {version}'s sources with pip:\n{_tail(done.stdout + done.stderr)}")
     with tarfile.open(archive) as tar:
-        members = [m for m in tar.getmembers() if m.name.startswith(f"daqp-{version}/csrc/") and (m.isfile() or m.isdir())]
+        members = [m for m in tar.getmembers() if (m.name.startswith(f"daqp-{version}/csrc/") or m.name == f"daqp-{version}/LICENSE")
+                   and (m.isfile() or m.isdir())]
         tar.extractall(cache, members=members, filter="data")
     if not (csrc / "src" / "api.c").is_file():
         raise CodegenError(f"DAQP's source distribution has no csrc/src/api.c ({archive})")
@@ -262,31 +248,17 @@ def build_host(directory: Path, manifest: dict, cc: str | None = None) -> dict:
     }
 
 
-def daqp_source_version(csrc: Path) -> str:
-    """"0.5" for the unprefixed API (as in the casadi wheel), ">=0.6" for the DAQP_-prefixed one."""
-    constants = csrc / "include" / "constants.h"
-    try:
-        return ">=0.6" if "DAQP_UPDATE_Rinv" in constants.read_text() else "0.5"
-    except OSError:
-        raise CodegenError(f"{csrc} is not DAQP's csrc folder (no include/constants.h)") from None
-
-
-def build_firmware(directory: Path, manifest: dict, daqp_src: Path | None, qemu: bool = True) -> dict:
+def build_firmware(directory: Path, manifest: dict, qemu: bool = True) -> dict:
     """Cross-compile for Cortex-M7 (double FPU), report flash/RAM, run the golden test on qemu."""
     if shutil.which("arm-none-eabi-gcc") is None:
         raise CodegenError("arm-none-eabi-gcc not found: install gcc-arm-none-eabi and libnewlib-arm-none-eabi")
-    variables = {}
-    source = None
-    if manifest["nx"]:
-        source = Path(daqp_src) if daqp_src else daqp_sources()
-        variables["DAQP_SRC"] = str(source)
+    variables: dict[str, str] = {}
     make(directory, ["firmware"], "firmware build", variables, timeout=1200)
     name = manifest["name"]
     sections = _arm_sections(directory / "firmware" / f"{name}_fw.size")
     text, data, bss = sections.get("text", 0), sections.get("data", 0), sections.get("bss", 0)
     result = {
         "cpu": "cortex-m7 fpv5-d16 hard-float",
-        "daqp_source": f"{source} (API {daqp_source_version(source)})" if source else None,
         "flash_bytes": text + data,
         "ram_bytes": data + bss,
         "text_bytes": text,
@@ -362,7 +334,6 @@ def compile_bundle(
     target: str = "host",
     cc: str | None = None,
     daqp_src: str | Path | None = None,
-    warm_start: bool = False,
     golden_count: int = GOLDEN_COUNT,
     qemu: bool = True,
     robot: Robot | None = None,
@@ -396,10 +367,9 @@ def compile_bundle(
         _remove_created(created)
         raise CodegenError(f"cannot write into {out_dir.parent}: {exc.strerror}") from None
     try:
-        daqp_include, daqp_library = casadi_daqp() if controller.nx else ("", "")
+        source = (Path(daqp_src) if daqp_src else daqp_sources()) if controller.nx else None
         sources = generate_sources(controller, tmp, spec_bytes=spec_bytes, golden_count=golden_count,
-                                   warm_start=warm_start, daqp_include=str(daqp_include),
-                                   daqp_library=str(daqp_library), model=model)
+                                   daqp_source=source, model=model)
         manifest = sources.manifest
         report = BuildReport(out_dir, manifest, build)
         if build:
@@ -407,8 +377,7 @@ def compile_bundle(
             manifest["built"] = True
             _note_heap(tmp / f"{manifest['name']}.h", manifest["host"].get("init_heap_bytes"))
         if target == "cortex-m7":
-            source = Path(daqp_src) if daqp_src else None
-            report.firmware = manifest["cortex_m7"] = build_firmware(tmp, manifest, source, qemu=qemu)
+            report.firmware = manifest["cortex_m7"] = build_firmware(tmp, manifest, qemu=qemu)
         (tmp / "manifest.json").write_text(json.dumps(manifest, indent=2) + "\n")
         _install(tmp, out_dir)
     except BaseException as exc:

@@ -53,7 +53,8 @@ import casadi
 
 from ..robot.model import Robot
 from ..spec import Spec, load_spec
-from .build import casadi_daqp, compile_bundle
+from .build import compile_bundle
+from .bundle import DAQP_VERSION
 from .bundle import GENERATOR, CodegenError, spec_digest, version
 from .loader import CompiledController, load_bundle
 from .model import model_digest
@@ -123,17 +124,9 @@ def _compiler_identity(cc: str) -> dict:
     return identity
 
 
-@lru_cache(maxsize=1)
 def _daqp_identity() -> dict:
-    try:
-        include, library = casadi_daqp()
-    except CodegenError as error:
-        return {"error": str(error)}
-    headers = hashlib.sha256()
-    for header in sorted(include.glob("*.h")):
-        headers.update(header.name.encode() + b"\0" + hashlib.sha256(header.read_bytes()).digest())
-    return {"include": str(include), "library": str(library), "library_sha256": _sha256_file(library),
-            "headers_sha256": headers.hexdigest()}
+    """The DAQP whose sources every bundle compiles (downloaded once, by version)."""
+    return {"version": DAQP_VERSION}
 
 
 def _module_version(name: str) -> str | None:
@@ -217,7 +210,7 @@ class BundleCache:
             "formulation": formulation,
             "model_sha256": model_digest(robot),
             "model_changes": dict(model_changes or {}),
-            "options": {"warm_start": False, "golden_count": None, "target": "host"},
+            "options": {"golden_count": None, "target": "host"},
             "toolchain": toolchain(),
         }
         return CacheKey.of(parts, spec.name, formulation)

@@ -9,16 +9,16 @@ from __future__ import annotations
 import ctypes
 
 # Outputs of the generated qp_data, in the order the wrapper points `res` at them.
-C_DATA_OUTPUTS = ("H", "f", "A_rowmajor", "bl", "bu", "tau0", "T", "ddq0", "Q", "s0", "S")
+C_DATA_OUTPUTS = ("H", "f", "A_rowmajor", "bl", "bu", "tau0", "T", "ddq0", "Q", "s0", "S", "p0", "P")
 
 
-def array_lengths(nx: int, na: int, nlevels: int, nref: int, nr: int) -> dict[str, int]:
+def array_lengths(nx: int, na: int, nlevels: int, nref: int, nr: int, np_: int, nh: int) -> dict[str, int]:
     """Lengths of the structs' arrays (the header's `*_ALLOC`): at least 1, as C99 has no empty
-    arrays. The relaxed QP has NX + NR variables and NA + NR rows; without relaxable rows its
-    arrays are placeholders of length 1."""
+    arrays. nr: joint/Cartesian bound rows; np_: rows of an over-constrained lowest level; nh:
+    DAQP break points."""
     return {
         "nref": max(nref, 1), "nx": max(nx, 1), "na": max(na, 1), "nc": max(nx + na, 1), "nlevels": max(nlevels, 1),
-        "nx2": nx + nr if nr else 1, "na2": na + nr if nr else 1, "nc2": nx + na + 2 * nr if nr else 1,
+        "nr": max(nr, 1), "np": max(np_, 1), "nh": max(nh, 1),
     }
 
 
@@ -33,7 +33,7 @@ def casadi_work_lengths(casadi_work: dict) -> dict[str, int]:
     }
 
 
-def info_struct(nq: int, nlevels: int, nx: int) -> type[ctypes.Structure]:
+def info_struct(nq: int, nlevels: int, nx: int, nr: int) -> type[ctypes.Structure]:
     class Info(ctypes.Structure):
         _fields_ = [
             ("ddq", ctypes.c_double * nq),
@@ -41,6 +41,8 @@ def info_struct(nq: int, nlevels: int, nx: int) -> type[ctypes.Structure]:
             ("x", ctypes.c_double * max(nx, 1)),
             ("nx", ctypes.c_int),
             ("status", ctypes.c_int),
+            ("relaxed", ctypes.c_int * max(nr, 1)),
+            ("relaxed_count", ctypes.c_int),
             ("solves", ctypes.c_int),
             ("iterations", ctypes.c_int),
             ("exitflag", ctypes.c_int),
@@ -49,22 +51,12 @@ def info_struct(nq: int, nlevels: int, nx: int) -> type[ctypes.Structure]:
     return Info
 
 
-def _qp_fields(suffix: str, nx: int, na: int, nc: int) -> list[tuple[str, type]]:
-    """H, f, A, bl, bu and sense of one QP (the QP, or with suffix "2" the relaxed QP)."""
-    return [
-        (f"H{suffix}", ctypes.c_double * (nx * nx)),
-        (f"f{suffix}", ctypes.c_double * nx),
-        (f"A{suffix}", ctypes.c_double * (na * nx)),
-        (f"bl{suffix}", ctypes.c_double * nc),
-        (f"bu{suffix}", ctypes.c_double * nc),
-        (f"sense{suffix}", ctypes.c_int * nc),
-    ]
-
-
 def workspace_struct(nq: int, nref: int, nx: int, na: int, nlevels: int, casadi_work: dict,
-                     solver_bytes: int, nr: int = 0) -> type[ctypes.Structure]:
-    length = array_lengths(nx, na, nlevels, nref, nr)
+                     solver_bytes: int, nr: int, np_: int, nh: int) -> type[ctypes.Structure]:
+    length = array_lengths(nx, na, nlevels, nref, nr, np_, nh)
     work = casadi_work_lengths(casadi_work)
+    d, i = ctypes.c_double, ctypes.c_int
+    nxa, nc = length["nx"], length["nc"]
 
     class Solver(ctypes.Union):
         _fields_ = [
@@ -80,24 +72,16 @@ def workspace_struct(nq: int, nref: int, nx: int, na: int, nlevels: int, casadi_
             ("arg", ctypes.c_void_p * work["arg"]),
             ("res", ctypes.c_void_p * work["res"]),
             ("iw", ctypes.c_longlong * work["iw"]),
-            ("w", ctypes.c_double * work["w"]),
-            *_qp_fields("", length["nx"], length["na"], length["nc"]),
-            ("tau0", ctypes.c_double * nq),
-            ("T", ctypes.c_double * (nq * length["nx"])),
-            ("ddq0", ctypes.c_double * nq),
-            ("Q", ctypes.c_double * (nq * length["nx"])),
-            ("s0", ctypes.c_double * length["nlevels"]),
-            ("S", ctypes.c_double * (length["nlevels"] * length["nx"])),
-            ("x", ctypes.c_double * length["nx"]),
-            *_qp_fields("2", length["nx2"], length["na2"], length["nc2"]),
-            ("x2", ctypes.c_double * length["nx2"]),
-            ("zeros", ctypes.c_double * nq),
-            ("last_q", ctypes.c_double * nq),
-            ("gravity", ctypes.c_double * nq),
-            ("have_last_q", ctypes.c_int),
-            ("warm_start", ctypes.c_int),
-            ("n_warm", ctypes.c_int),
-            ("warm", ctypes.c_int * length["nc"]),
+            ("w", d * work["w"]),
+            ("H", d * (nxa * nxa)), ("f", d * nxa), ("A", d * (length["na"] * nxa)),
+            ("bl", d * nc), ("bu", d * nc), ("sense", i * nc),
+            ("tau0", d * nq), ("T", d * (nq * nxa)), ("ddq0", d * nq), ("Q", d * (nq * nxa)),
+            ("s0", d * length["nlevels"]), ("S", d * (length["nlevels"] * nxa)), ("x", d * nxa),
+            ("bl0", d * nc), ("bu0", d * nc), ("f0", d * nxa), ("bp", i * length["nh"]),
+            ("p0", d * length["np"]), ("P", d * (length["np"] * nxa)), ("x_free", d * nxa),
+            ("bl_free", d * nc), ("bu_free", d * nc),
+            ("zeros", d * nq), ("last_q", d * nq), ("dq_finite", d * nq), ("fallback", d * nq),
+            ("have_last_q", i),
             ("solver", Solver),
         ]
 

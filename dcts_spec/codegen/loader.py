@@ -20,7 +20,7 @@ class CompiledController:
     `step(q, dq, tau_ext=None, ref=None)` returns a StepResult like `Controller.step` (fresh
     arrays, never views of internal buffers); `step_into` is the allocation-free variant for
     loops that keep their own arrays (the simulation). The C workspace keeps the same history
-    the Python runtime keeps (the last finite q) plus the QP solver's warm start. One
+    the Python runtime keeps (the last finite q). One
     controller must not be stepped from several threads at once (neither may the C workspace).
 
     Per step, the inputs are copied into buffers allocated once (their addresses are passed to
@@ -55,9 +55,11 @@ class CompiledController:
         self._lib = ctypes.CDLL(str(library))
         self._bind()
         levels = len(self.priorities)
-        self._Info = info_struct(self.n, levels, self.nx)
+        self.bound_names: list[str] = list(m["bound_names"])
+        self._Info = info_struct(self.n, levels, self.nx, len(self.bound_names))
         workspace = workspace_struct(self.n, self.ref_size, self.nx, self.na, levels, m["casadi_work"],
-                                     m["solver_storage_bytes"], m.get("relaxable_rows", 0))
+                                     m["solver_storage_bytes"], len(self.bound_names), m["least_squares_rows"],
+                                     len(m["break_points_relaxed"]))
         self.workspace_bytes = int(self._lib_fn("workspace_size")())
         if self.workspace_bytes != ctypes.sizeof(workspace) or self._lib_fn("info_size")() != ctypes.sizeof(self._Info):
             raise CodegenError(f"{library}: struct sizes differ from the manifest's (stale build?)")
@@ -102,8 +104,6 @@ class CompiledController:
         self._release.argtypes, self._release.restype = [ctypes.c_void_p], None
         self._reset = self._lib_fn("reset")
         self._reset.argtypes, self._reset.restype = [ctypes.c_void_p], None
-        self._set_warm = self._lib_fn("set_warm_start")
-        self._set_warm.argtypes, self._set_warm.restype = [ctypes.c_void_p, ctypes.c_int], None
         self._step = self._lib_fn("step")
         # Every argument is a pointer prepared once (see _prepare_buffers).
         self._step.argtypes = [ctypes.c_void_p] * 7
@@ -167,8 +167,9 @@ class CompiledController:
 
         The arrays of the result are new (later steps do not change them)."""
         status = self._call(q, dq, tau_ext, ref)
+        relaxed = [name for name, flag in zip(self.bound_names, self._info.relaxed) if flag] if status == 1 else []
         return StepResult(self._tau.copy(), self._ddq_out.copy(), self._scaling_out.copy(), int(status),
-                          self._solution(status))
+                          self._solution(status), relaxed)
 
     def step_into(self, q, dq, tau_ext, ref, tau: np.ndarray, ddq: np.ndarray | None = None,
                   scaling: np.ndarray | None = None) -> int:
@@ -198,11 +199,8 @@ class CompiledController:
         return {"solves": self._info.solves, "iterations": self._info.iterations, "exitflag": self._info.exitflag}
 
     def reset(self) -> None:
-        """Forget the history (last finite q, warm start)."""
+        """Forget the history (the last finite q)."""
         self._reset(self._ws)
-
-    def set_warm_start(self, on: bool) -> None:
-        self._set_warm(self._ws, int(bool(on)))
 
     def close(self) -> None:
         if getattr(self, "_open", False):

@@ -1,0 +1,371 @@
+"""dcts against an independent strict lexicographic reference with bounds ACTIVE.
+
+The reference (tests/lexicographic_reference.py) solves the promised hierarchy as a cascade of
+exact LPs/QPs with HiGHS from Pinocchio numerics; see its docstring for the semantics.
+
+Robots iiwa14, panda (built in) and a UR5 by URDF path, each with tight limits:
+  * joint torques well below the URDF's, so gravity plus the tasks saturate some joints,
+  * joint velocities ≤ 1 rad/s, states with some joints close to it,
+  * tool z ≥ z_min, with the priority-1 position target below z_min (the top task pulls through
+    the bound), and states near the bound moving toward it.
+Task sets (priority levels):
+  2: position(3) @1, orientation(rx, ry) @2                      (null space left: energy)
+  3: position(3) @1, orientation(rx, ry) @2, posture @3          (posture over-constrained)
+  4: position(3) @1, orientation(rx, ry) @2, damping of joint 1 @3, posture @4
+The controller's actual acceleration is a = ddq + M⁻¹τ_ext (external_torque: measured).
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from dcts_spec.controller import Controller
+from dcts_spec.robot.builtin import example_robot_data_dir
+from dcts_spec.spec import load_spec_text
+from dcts_spec.validate import validate_spec
+from formulation_cases import HOME, TOOL, State, check_bounds, numeric_tasks, spec_text
+from lexicographic_reference import LexicographicSolution, lexicographic_solution, task_levels
+from reference import closed_form_hierarchy, dynamics
+
+DT = 0.001  # controller.period (default)
+ROBOTS = ("iiwa14", "panda", "ur5")
+LEVEL_COUNTS = (2, 3, 4)
+N_STATES = 100  # per (robot, level count) in the default run
+N_SLOW = 1000  # per robot and level count, @slow
+LEVEL_TOL = 1e-6  # ‖achieved − reference‖ / max(1, ‖reference‖) per level
+BOUND_TOL = 1e-6  # relative violation of any hard bound when status is 0
+FULL_TOL = 1e-6  # a level counts as fully met when ‖J a + J̇q̇ − ẍ_d‖ ≤ FULL_TOL·max(1, ‖ẍ_d‖)
+
+UR5_URDF = str(example_robot_data_dir() / "ur_description" / "urdf" / "ur5_robot.urdf")
+_TOOL = {**TOOL, "ur5": "tool0"}
+_HOME = {**HOME, "ur5": np.array([0.0, -1.2, 1.5, -1.9, -1.57, 0.0])}
+_FIRST_JOINT = {"iiwa14": "joint1", "panda": "panda_joint1", "ur5": "shoulder_pan_joint"}
+# Tight limits (the URDF's efforts are iiwa14 100 each, panda 87/12, UR5 150/28 Nm).
+TAU_MAX = {
+    "iiwa14": [60, 60, 40, 40, 20, 10, 10],
+    "panda": [40, 40, 30, 40, 6, 6, 6],
+    "ur5": [60, 60, 30, 10, 10, 10],
+}
+V_MAX = 1.0  # rad/s, every joint
+# Tool z ≥ Z_MIN (m), and the position target (below Z_MIN: the top task pulls through the bound).
+Z_MIN = {"iiwa14": 0.40, "panda": 0.40, "ur5": 0.20}
+TARGET = {"iiwa14": [0.6, 0.0, 0.25], "panda": [0.5, 0.0, 0.25], "ur5": [0.55, 0.1, 0.05]}
+
+
+def _fmt(v) -> str:
+    return "[" + ", ".join(repr(float(x)) for x in np.atleast_1d(v)) + "]"
+
+
+def _robot_line(robot: str) -> str:
+    return UR5_URDF if robot == "ur5" else robot
+
+
+def _tool_pose(model: pin.Model, robot: str, q: np.ndarray) -> pin.SE3:
+    data = model.createData()
+    pin.framesForwardKinematics(model, data, q)
+    return data.oMf[model.getFrameId(_TOOL[robot])]
+
+
+def bounded_spec_text(robot: str, levels: int) -> str:
+    tool = _TOOL[robot]
+    home = _HOME[robot]
+    model = pin.buildModelFromUrdf(UR5_URDF) if robot == "ur5" else None
+    if model is None:
+        from dcts_spec.robot.builtin import load_builtin_model
+
+        model = load_builtin_model(robot)
+    rotation = pin.exp3(np.array([0.3, -0.2, 0.0])) @ _tool_pose(model, robot, home).rotation
+    tasks = [
+        f"{{name: reach, type: position, frame: {tool}, priority: 1, gains: {{kp: 40, kd: 12}}, "
+        f"reference: {{position: {_fmt(TARGET[robot])}}}}}",
+        f"{{name: point, type: orientation, frame: {tool}, axes: [rx, ry], priority: 2, gains: {{kp: 30, kd: 10}}, "
+        f"reference: {{rpy: {_fmt(pin.rpy.matrixToRpy(rotation))}}}}}",
+    ]
+    if levels == 4:
+        tasks.append(f"{{name: swing_damping, type: joint, joints: [{_FIRST_JOINT[robot]}], priority: 3, gains: {{kp: 0, kd: 5}}}}")
+    if levels >= 3:
+        tasks.append(f"{{name: posture, type: joint, priority: {levels}, gains: {{kp: 10, kd: 6}}, reference: {{q: {_fmt(home)}}}}}")
+    limits = (
+        f"  joint_torque: {{max: {_fmt(TAU_MAX[robot])}}}\n"
+        f"  joint_velocity: {{max: {V_MAX}}}\n"
+        f"  cartesian:\n    - {{frame: {tool}, axis: z, min: {Z_MIN[robot]!r}}}\n"
+    )
+    text = spec_text("X", "\n".join(f"  - {t}" for t in tasks), limits, name=f"lex_{robot}_{levels}")
+    key = "urdf" if robot == "ur5" else "model"
+    return text.replace("robot: {model: X}", f"robot: {{{key}: {_robot_line(robot)}}}")
+
+
+@dataclass
+class Case:
+    controller: Controller
+    tasks: list
+    model: pin.Model
+
+
+@functools.lru_cache(maxsize=None)
+def case(robot: str, levels: int, text: str | None = None) -> Case:
+    spec = load_spec_text(text if text is not None else bounded_spec_text(robot, levels))
+    report = validate_spec(spec)
+    c = Controller(spec, report.robot, "dcts")
+    return Case(c, numeric_tasks(spec, c.robot.joint_names), c.robot.model)
+
+
+def near_bound_states(robot: str, model: pin.Model, count: int, seed: int) -> list[State]:
+    """States around HOME: half of them with the tool just above Z_MIN moving down, half with one or
+    two joints close to the velocity limit; q̇ ~ N(0, 0.3) otherwise, τ_ext ~ N(0, 3)."""
+    rng = np.random.default_rng(seed)
+    n = model.nv
+    fid = model.getFrameId(_TOOL[robot])
+    lo, hi = model.lowerPositionLimit + 0.05, model.upperPositionLimit - 0.05
+    out: list[State] = []
+    while len(out) < count:
+        q = np.clip(_HOME[robot] + rng.normal(0.0, 0.5, n), lo, hi)
+        dq = rng.normal(0.0, 0.3, n)
+        data = model.createData()
+        pin.framesForwardKinematics(model, data, q)
+        z = data.oMf[fid].translation[2]
+        if len(out) % 2 == 0:
+            gap = z - Z_MIN[robot]
+            if not 0.0 < gap < 0.05:
+                continue
+            J = pin.computeFrameJacobian(model, data, q, fid, pin.LOCAL_WORLD_ALIGNED)[:3]
+            speed = rng.uniform(0.6, 1.0) * np.sqrt(2 * 5.0 * gap)  # around the braking speed (5 m/s²)
+            dq = dq + np.linalg.pinv(J) @ np.array([0.0, 0.0, -speed])
+        else:
+            for j in rng.choice(n, size=rng.integers(1, 3), replace=False):
+                dq[j] = rng.choice([-1.0, 1.0]) * V_MAX * rng.uniform(0.97, 0.999)
+        dq = np.clip(dq, -0.999 * V_MAX, 0.999 * V_MAX)
+        out.append(State(q, dq, rng.normal(0.0, 3.0, n)))
+    return out
+
+
+@dataclass
+class Record:
+    index: int
+    state: State
+    ref: LexicographicSolution
+    status: int
+    scaling: np.ndarray
+    relaxed: list
+    tau: np.ndarray
+    a: np.ndarray  # controller's actual acceleration ddq + M⁻¹τ_ext
+    achieved: list  # controller's J_i a + J̇_i q̇
+    violation: float  # controller's largest relative hard-bound violation (formulation_cases.check_bounds)
+    active: dict  # reference's active hard rows kinds
+
+
+def _evaluate_state(cs: Case, i: int, st: State) -> Record:
+    c = cs.controller
+    ref = lexicographic_solution(c.robot, cs.tasks, st.q, st.dq, st.tau_ext, DT)
+    r = c.step(st.q, st.dq, st.tau_ext)
+    M, _, _ = dynamics(cs.model, st.q, st.dq)
+    a = r.ddq + np.linalg.solve(M, st.tau_ext)
+    levels = task_levels(cs.model, cs.tasks, st.q, st.dq)
+    achieved = [lv.J @ a + lv.bias for lv in levels]
+    violation = check_bounds(c.robot, st.q, st.dq, r.tau, a, DT).violation()
+    active = {}
+    if ref.feasible:
+        active = check_bounds(c.robot, st.q, st.dq, ref.tau, ref.a, DT).active(1e-7)
+    return Record(i, st, ref, r.status, np.asarray(r.scaling), list(r.relaxed), r.tau, a, achieved, violation, active)
+
+
+@functools.lru_cache(maxsize=None)
+def records(robot: str, levels: int, count: int = N_STATES, seed: int = 0) -> list[Record]:
+    cs = case(robot, levels)
+    states = near_bound_states(robot, cs.model, count, seed + 101 * ROBOTS.index(robot) + 7 * levels)
+    return [_evaluate_state(cs, i, st) for i, st in enumerate(states)]
+
+
+def _rel(x, ref) -> float:
+    return float(np.linalg.norm(np.asarray(x) - np.asarray(ref)) / max(1.0, np.linalg.norm(ref)))
+
+
+def _first_imperfect(achieved, levels) -> int:
+    """Index of the highest-priority level not fully met (len(levels) if all are)."""
+    for i, (x, lv) in enumerate(zip(achieved, levels)):
+        if np.linalg.norm(x - lv.target) > FULL_TOL * max(1.0, np.linalg.norm(lv.target)):
+            return i
+    return len(levels)
+
+
+def _describe(robot: str, levels: int, rec: Record) -> str:
+    lines = [f"{robot}/{levels} levels state #{rec.index}: status {rec.status} relaxed {rec.relaxed} "
+             f"scaling ctrl {np.round(rec.scaling, 9).tolist()} ref {np.round(rec.ref.scaling, 9).tolist()} "
+             f"ref margin {rec.ref.margin:.3g}",
+             f"  q={np.round(rec.state.q, 6).tolist()} dq={np.round(rec.state.dq, 6).tolist()}"]
+    if rec.ref.feasible:
+        for i, (x, y, lv) in enumerate(zip(rec.achieved, rec.ref.achieved, rec.ref.levels)):
+            lines.append(f"  level {i}: ctrl {np.round(x, 6).tolist()} ref {np.round(y, 6).tolist()} "
+                         f"target {np.round(lv.target, 6).tolist()} rel {_rel(x, y):.3g}")
+    return "\n".join(lines)
+
+
+# -- checks shared by the default and the slow runs -----------------------------------------------
+
+
+def check_status(robot, levels, recs):
+    bad = [r for r in recs if r.ref.feasible and r.status not in (0, 1)]
+    assert not bad, "\n".join(_describe(robot, levels, r) for r in bad[:5])
+
+
+def check_bounds_when_ok(robot, levels, recs):
+    bad = [r for r in recs if r.status == 0 and r.violation > BOUND_TOL]
+    assert not bad, "\n".join(f"violation {r.violation:.3g}\n" + _describe(robot, levels, r) for r in bad[:5])
+
+
+def check_levels(robot, levels, recs):
+    bad = []
+    for r in recs:
+        if not (r.ref.feasible and r.status == 0):
+            continue
+        errors = [_rel(x, y) for x, y in zip(r.achieved, r.ref.achieved)]
+        if max(errors) > LEVEL_TOL:
+            bad.append((max(errors), r))
+    bad.sort(key=lambda e: -e[0])
+    compared = sum(1 for r in recs if r.ref.feasible and r.status == 0)
+    assert not bad, (f"{len(bad)} of {compared} states disagree with the reference; worst:\n"
+                     + "\n".join(_describe(robot, levels, r) for _, r in bad[:3]))
+
+
+def check_gives_way(robot, levels, recs):
+    bad = []
+    for r in recs:
+        if not (r.ref.feasible and r.status == 0):
+            continue
+        ctrl = _first_imperfect(r.achieved, r.ref.levels)
+        ref = _first_imperfect(r.ref.achieved, r.ref.levels)
+        if ctrl != ref:
+            bad.append((ctrl, ref, r))
+    assert not bad, (f"{len(bad)} states where a different level gives way first (ctrl level, ref level): "
+                     + str([(c, f, r.index) for c, f, r in bad[:10]]) + "\n"
+                     + "\n".join(_describe(robot, levels, r) for *_, r in bad[:3]))
+
+
+# -- default run ----------------------------------------------------------------------------------
+
+
+PARAMS = [(robot, levels) for robot in ROBOTS for levels in LEVEL_COUNTS]
+
+
+@pytest.mark.parametrize(("robot", "levels"), PARAMS)
+def test_bounds_are_active(robot, levels):
+    """Premise: the states make torque, joint and Cartesian bounds bind in the reference's solution."""
+    recs = records(robot, levels)
+    feasible = [r for r in recs if r.ref.feasible]
+    assert len(feasible) >= 0.5 * len(recs), f"only {len(feasible)} of {len(recs)} states feasible"
+    for kind in ("torque", "joint", "cartesian"):
+        count = sum(1 for r in feasible if r.active[kind].size)
+        assert count >= 0.05 * len(feasible), f"{kind} bounds bind in only {count} of {len(feasible)} states"
+    scaled = sum(1 for r in feasible if _first_imperfect(r.ref.achieved, r.ref.levels) < len(r.ref.levels))
+    assert scaled >= 0.2 * len(feasible), f"only {scaled} states have a level giving way"
+
+
+@pytest.mark.parametrize(("robot", "levels"), PARAMS)
+def test_status_never_fallback(robot, levels):
+    check_status(robot, levels, records(robot, levels))
+
+
+@pytest.mark.parametrize(("robot", "levels"), PARAMS)
+def test_hard_bounds_hold_when_status_ok(robot, levels):
+    check_bounds_when_ok(robot, levels, records(robot, levels))
+
+
+@pytest.mark.parametrize(("robot", "levels"), PARAMS)
+def test_levels_match_lexicographic_reference(robot, levels):
+    check_levels(robot, levels, records(robot, levels))
+
+
+@pytest.mark.parametrize(("robot", "levels"), PARAMS)
+def test_lowest_level_gives_way_first(robot, levels):
+    check_gives_way(robot, levels, records(robot, levels))
+
+
+# -- slow run -------------------------------------------------------------------------------------
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("robot", "levels"), PARAMS)
+def test_slow_against_lexicographic_reference(robot, levels):
+    recs = records(robot, levels, N_SLOW, 1)
+    for check in (check_status, check_bounds_when_ok, check_levels, check_gives_way):
+        check(robot, levels, recs)
+
+
+# -- the reference itself -------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("robot", ROBOTS)
+def test_reference_equals_closed_form_without_bounds(robot):
+    """Self-check: with wide limits and states away from them, the cascade is the closed form."""
+    text = bounded_spec_text(robot, 2)
+    text = text.replace(f"max: {_fmt(TAU_MAX[robot])}", "max: 10000, allow_outside_urdf: true")
+    text = text.replace(f"max: {V_MAX}", "max: 20, allow_outside_urdf: true")
+    text = text.replace(f"min: {Z_MIN[robot]!r}", "min: -5.0")
+    cs = case(robot, 2, text)
+    rng = np.random.default_rng(5)
+    n = cs.model.nv
+    for _ in range(10):
+        q = np.clip(_HOME[robot] + rng.normal(0.0, 0.2, n), cs.model.lowerPositionLimit + 0.3, cs.model.upperPositionLimit - 0.3)
+        dq, tau_ext = rng.normal(0.0, 0.3, n), rng.normal(0.0, 3.0, n)
+        sol = lexicographic_solution(cs.controller.robot, cs.tasks, q, dq, tau_ext, DT)
+        tau, a, _ = closed_form_hierarchy(cs.model, cs.tasks, q, dq, tau_ext)
+        assert sol.feasible and sol.scaling == [1.0, 1.0]
+        assert _rel(sol.tau, tau) < 1e-9, (sol.tau, tau)
+        assert _rel(sol.a, a) < 1e-9
+
+
+# -- regression: panda, tool z ≥ 0.30, position target below it -------------------------------------
+
+
+def _regression_text() -> str:
+    tool = TOOL["panda"]
+    posture = _fmt(HOME["panda"])
+    tasks = [
+        f"{{name: reach, type: position, frame: {tool}, priority: 1, gains: {{kp: 40, kd: 12}}, reference: {{position: [0.5, 0.0, 0.15]}}}}",
+        f"{{name: level, type: orientation, frame: {tool}, axes: [rx, ry], priority: 2, gains: {{kp: 0, kd: 10}}}}",
+        f"{{name: posture, type: joint, priority: 3, gains: {{kp: 10, kd: 6}}, reference: {{q: {posture}}}}}",
+    ]
+    limits = f"  cartesian:\n    - {{frame: {tool}, axis: z, min: 0.30}}\n"
+    return spec_text("panda", "\n".join(f"  - {t}" for t in tasks), limits, name="panda_floor")
+
+
+def _regression_states(model: pin.Model, count: int, seed: int) -> list[State]:
+    """Tool 0–3 cm above z = 0.30, at rest or moving down below the braking speed."""
+    rng = np.random.default_rng(seed)
+    fid = model.getFrameId(TOOL["panda"])
+    out = []
+    while len(out) < count:
+        q = np.clip(HOME["panda"] + rng.normal(0.0, 0.4, 7), model.lowerPositionLimit + 0.1, model.upperPositionLimit - 0.1)
+        data = model.createData()
+        pin.framesForwardKinematics(model, data, q)
+        gap = data.oMf[fid].translation[2] - 0.30
+        if not 0.0 <= gap < 0.03:
+            continue
+        J = pin.computeFrameJacobian(model, data, q, fid, pin.LOCAL_WORLD_ALIGNED)[:3]
+        speed = rng.uniform(0.0, 0.8) * np.sqrt(2 * 5.0 * gap)
+        dq = np.linalg.pinv(J) @ np.array([0.0, 0.0, -speed]) + rng.normal(0.0, 0.05, 7)
+        out.append(State(q, dq, np.zeros(7)))
+    return out
+
+
+def test_regression_panda_cartesian_floor():
+    cs = case("panda", 3, _regression_text())
+    c = cs.controller
+    bad = []
+    for i, st in enumerate(_regression_states(cs.model, 50, 3)):
+        r = c.step(st.q, st.dq, st.tau_ext)
+        a = r.ddq  # τ_ext = 0
+        bounds = check_bounds(c.robot, st.q, st.dq, r.tau, a, DT)
+        ref = lexicographic_solution(c.robot, cs.tasks, st.q, st.dq, st.tau_ext, DT)
+        levels = task_levels(cs.model, cs.tasks, st.q, st.dq)
+        err = _rel(levels[0].J @ a + levels[0].bias, ref.achieved[0]) if ref.feasible else np.nan
+        if r.status != 0 or bounds.violation() > BOUND_TOL or not r.scaling[0] < 1 or not err <= LEVEL_TOL:
+            bad.append(f"state {i}: status {r.status} relaxed {r.relaxed} cartesian margin {bounds.cartesian} "
+                       f"violation {bounds.violation():.3g} scaling {r.scaling} ref scaling {ref.scaling} "
+                       f"level-1 rel err {err:.3g} ref feasible {ref.feasible}")
+    assert not bad, f"{len(bad)} of 50 states:\n" + "\n".join(bad[:8])
