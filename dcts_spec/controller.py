@@ -20,7 +20,7 @@ from .formulations import FORMULATIONS, ControlLaw, ControlProblem, build_proble
 from .formulations.fallback import fallback_torque
 from .formulations.qp import BOUNDS, HARD, TASK
 from .robot.model import Robot
-from .solve import BOUND_TOLERANCE, DAQP_EXIT_INFEASIBLE, check_bounds, solve_lexicographic
+from .solve import BOUND_TOLERANCE, check_bounds, solve_lexicographic
 from .spec import Spec, load_spec
 from .tasks import ReferenceInput
 from .validate import ValidationReport, validate_spec
@@ -174,28 +174,34 @@ class Controller:
         return lower, upper
 
     def _solve(self, data: dict[str, np.ndarray]) -> tuple[np.ndarray | None, bool]:
-        """The lexicographic QP's solution (None if DAQP failed), and whether the joint/Cartesian
-        bounds had to be relaxed (the torque limits cannot hold them all).
+        """The lexicographic QP's solution (None if there is none), and whether the joint/Cartesian
+        bounds had to be relaxed (the torque limits cannot hold them all)."""
+        x = self._attempt(data, relaxed=False)
+        if x is not None:
+            return x, False
+        return self._attempt(data, relaxed=True), True
 
-        DAQP meets a hierarchy's hard level only to ~1e-5 relative in ill-conditioned states (its
-        hierarchical mode does not refine the primal solution); a hard row crossed beyond the
-        tolerances is then projected back: min ½‖x − x_h‖²_H over the hard rows, one ordinary QP,
-        which DAQP solves exactly."""
+    def _attempt(self, data: dict[str, np.ndarray], relaxed: bool) -> np.ndarray | None:
+        """One lexicographic solve, its hard rows checked (the bounds among them unless `relaxed`).
+
+        DAQP's hierarchical mode meets its hard level only to ~1e-5 relative in ill-conditioned
+        states (it does not refine the primal solution), and where a level fails (exit flag 3) it
+        returns the point of the level above, which crosses the hard rows when the hard level
+        itself was infeasible. So its answer is
+        checked: a hard row crossed beyond the tolerances is projected back, min ½‖x − x_h‖²_H over
+        the hard rows, one ordinary QP that DAQP solves exactly (or proves infeasible)."""
         qp = self.law.qp
         H, f, A = data["H"], data["f"].ravel(), data["A"]
-        lower, upper = self._bounds(data)
-        relaxed = False
-        x, flag, _ = solve_lexicographic(H, f, A, lower, upper, qp.break_points())
-        if x is None and flag == DAQP_EXIT_INFEASIBLE:
-            relaxed = True
-            x, flag, _ = solve_lexicographic(H, f, A, lower, upper, qp.break_points(relaxed=True))
-        if x is None:
-            return None, relaxed
         hard = (HARD,) if relaxed else (HARD, BOUNDS)
-        if not self._holds(data, x, hard):
-            lower, upper = self._bounds(data, free=tuple(k for k in (BOUNDS, TASK) if k not in hard))
-            x, _, _ = solve_lexicographic(H, -H @ x, A, lower, upper, [lower.size])
-        return x, relaxed
+        lower, upper = self._bounds(data)
+        x, _, _ = solve_lexicographic(H, f, A, lower, upper, qp.break_points(relaxed))
+        if x is None:
+            return None
+        if self._holds(data, x, hard):
+            return x
+        lower, upper = self._bounds(data, free=tuple(k for k in (BOUNDS, TASK) if k not in hard))
+        x, _, _ = solve_lexicographic(H, -H @ x, A, lower, upper, [lower.size])
+        return x if x is not None and self._holds(data, x, hard) else None
 
     def _holds(self, data: dict[str, np.ndarray], x: np.ndarray, kinds: tuple[str, ...]) -> bool:
         """Do the variable bounds and the rows of the levels of `kinds` hold at x (within the tolerances)?"""

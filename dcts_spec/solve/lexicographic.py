@@ -23,7 +23,6 @@ from ..formulations.qp import BOUNDS, QP
 # the scaled problem, and a bounded iteration count (all levels and proximal steps together).
 DAQP_SETTINGS = {"primal_tol": 1e-8, "iter_limit": 1000}
 DAQP_INF = 1e30  # DAQP's "no bound"
-DAQP_EXIT_INFEASIBLE = -1  # its hard level cannot hold
 # A joint or Cartesian acceleration bound holds if it is crossed by at most this much, relative
 # to max(1, |bound|) (rad/s² or m/s²): over a 1 ms period ~5e-13 m or rad of position.
 BOUND_TOLERANCE = 1e-6
