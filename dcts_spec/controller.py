@@ -18,9 +18,9 @@ import numpy as np
 
 from .formulations import FORMULATIONS, ControlLaw, ControlProblem, build_problem
 from .formulations.fallback import fallback_torque
-from .formulations.qp import BOUNDS, HARD, TASK
+from .formulations.qp import BOUNDS
 from .robot.model import Robot
-from .solve import BOUND_TOLERANCE, check_bounds, solve_lexicographic
+from .solve import Solution, Structure, check_bounds, solve_lexicographic
 from .spec import Spec, load_spec
 from .tasks import ReferenceInput
 from .validate import ValidationReport, validate_spec
@@ -120,6 +120,9 @@ class Controller:
         self.fallback_function = ca.Function("fallback", [self.problem.q, self.problem.dq], [fallback], ["q", "dq"], ["tau"])
         self.tau_max = np.asarray(robot.limits.tau_max, dtype=float)
         self._last_q: np.ndarray | None = None
+        qp = self.law.qp
+        self._structure = None if qp is None else Structure(
+            qp.rows_of(BOUNDS), tuple((p.scaling, tuple(p.bend)) for p in qp.priorities))
 
     # -- sizes and layout ------------------------------------------------------------------------
 
@@ -134,11 +137,6 @@ class Controller:
     @property
     def na(self) -> int:
         return 0 if self.law.qp is None else self.law.qp.na
-
-    @property
-    def break_points(self) -> list[int]:
-        """DAQP's break points of the lexicographic QP (empty for closed forms)."""
-        return [] if self.law.qp is None else self.law.qp.break_points()
 
     @property
     def bound_names(self) -> list[str]:
@@ -161,67 +159,19 @@ class Controller:
 
     # -- running ---------------------------------------------------------------------------------
 
-    def _bounds(self, data: dict[str, np.ndarray], free: tuple[str, ...] = ()) -> tuple[np.ndarray, np.ndarray]:
-        """DAQP's lower and upper bounds (variables, then rows); the rows of the levels of kinds
-        `free` unbounded."""
-        qp = self.law.qp
-        lower = np.concatenate([data["lbx"].ravel(), data["lba"].ravel()])
-        upper = np.concatenate([data["ubx"].ravel(), data["uba"].ravel()])
-        for kind in free:
-            rows = qp.rows_of(kind)
-            lower[self.nx + rows.start : self.nx + rows.stop] = -np.inf
-            upper[self.nx + rows.start : self.nx + rows.stop] = np.inf
-        return lower, upper
-
-    def _solve(self, data: dict[str, np.ndarray]) -> tuple[np.ndarray | None, bool]:
-        """The lexicographic QP's solution (None if there is none), and whether the joint/Cartesian
-        bounds had to be relaxed (the torque limits cannot hold them all)."""
-        x = self._attempt(data, relaxed=False)
-        if x is not None:
-            return x, False
-        return self._attempt(data, relaxed=True), True
-
-    def _attempt(self, data: dict[str, np.ndarray], relaxed: bool) -> np.ndarray | None:
-        """One lexicographic solve, its hard rows checked (the bounds among them unless `relaxed`).
-
-        DAQP's hierarchical mode meets its hard level only to ~1e-5 relative in ill-conditioned
-        states (it does not refine the primal solution), and where a level fails (exit flag 3) it
-        returns the point of the level above, which crosses the hard rows when the hard level
-        itself was infeasible. So its answer is
-        checked: a hard row crossed beyond the tolerances is projected back, min ½‖x − x_h‖²_H over
-        the hard rows, one ordinary QP that DAQP solves exactly (or proves infeasible)."""
-        qp = self.law.qp
-        H, f, A = data["H"], data["f"].ravel(), data["A"]
-        hard = (HARD,) if relaxed else (HARD, BOUNDS)
-        lower, upper = self._bounds(data)
-        x, _, _ = solve_lexicographic(H, f, A, lower, upper, qp.break_points(relaxed))
-        if x is None:
-            return None
-        if self._holds(data, x, hard):
-            return x
-        lower, upper = self._bounds(data, free=tuple(k for k in (BOUNDS, TASK) if k not in hard))
-        x, _, _ = solve_lexicographic(H, -H @ x, A, lower, upper, [lower.size])
-        return x if x is not None and self._holds(data, x, hard) else None
-
-    def _holds(self, data: dict[str, np.ndarray], x: np.ndarray, kinds: tuple[str, ...]) -> bool:
-        """Do the variable bounds and the rows of the levels of `kinds` hold at x (within the tolerances)?"""
-        qp = self.law.qp
-        lbx, ubx = data["lbx"].ravel(), data["ubx"].ravel()
-        if np.any(x < lbx - BOUND_TOLERANCE) or np.any(x > ubx + BOUND_TOLERANCE):
-            return False
-        for kind in kinds:
-            rows = qp.rows_of(kind)
-            value = data["A"][rows.start : rows.stop] @ x
-            lo, hi = data["lba"].ravel()[rows.start : rows.stop], data["uba"].ravel()[rows.start : rows.stop]
-            crossed = np.maximum(lo - value, value - hi)
-            if np.any(crossed > BOUND_TOLERANCE * np.maximum(1.0, np.abs(np.where(value < lo, lo, hi)))):
-                return False
-        return True
+    def _solve(self, data: dict[str, np.ndarray], unbounded: bool = False) -> Solution | None:
+        """The lexicographic solution at the data (None if DAQP failed); `unbounded`: with the
+        torque limits and the joint/Cartesian bounds left out."""
+        lba, uba = data["lba"].ravel(), data["uba"].ravel()
+        if unbounded:
+            lba, uba = np.full(lba.size, -np.inf), np.full(uba.size, np.inf)
+        return solve_lexicographic(data["H"], data["f"].ravel(), data["A"], data["lbx"].ravel(), data["ubx"].ravel(),
+                                   lba, uba, self._structure)
 
     def _binding(self, data: dict[str, np.ndarray], x: np.ndarray) -> bool:
         """Does a torque limit or a joint/Cartesian bound bind at x?"""
         qp = self.law.qp
-        end = qp.rows_of(BOUNDS).stop if len(qp.rows_of(BOUNDS)) else qp.rows_of(HARD).stop
+        end = qp.rows_of(BOUNDS).stop
         value = data["A"][:end] @ x
         lo, hi = data["lba"].ravel()[:end], data["uba"].ravel()[:end]
         return bool(np.any(np.minimum(np.abs(value - lo), np.abs(hi - value)) <=
@@ -230,12 +180,11 @@ class Controller:
     def _least_squares_scaling(self, data: dict[str, np.ndarray], x: np.ndarray) -> float:
         if not self._binding(data, x):
             return 1.0
-        lower, upper = self._bounds(data, free=(HARD, BOUNDS))
-        free, _, _ = solve_lexicographic(data["H"], data["f"].ravel(), data["A"], lower, upper, self.law.qp.break_points())
+        free = self._solve(data, unbounded=True)
         if free is None:
             return 0.0
         P, p0 = data["P"], data["p0"].ravel()
-        return least_squares_scaling(P @ x + p0, P @ free + p0)
+        return least_squares_scaling(P @ x + p0, P @ free.x + p0)
 
     def fallback_torque(self, q: np.ndarray, dq: np.ndarray) -> np.ndarray:
         """The stable damping of `formulations/fallback.py` at q (else the last finite q), clipped to
@@ -283,10 +232,10 @@ class Controller:
         if self.nx:
             finite = all(np.all(np.isfinite(data[k])) for k in ("H", "f", "A")) and not any(
                 np.any(np.isnan(data[k])) for k in ("lba", "uba", "lbx", "ubx"))
-            solution, _ = self._solve(data) if finite else (None, False)
+            solution = self._solve(data) if finite else None
             if solution is None:
                 return self._fallback(q, dq, STATUS_SOLVER_FAILED, np.zeros(0))
-            x = solution
+            x = solution.x
         tau = data["tau0"].ravel() + data["T"] @ x
         tolerance = TORQUE_TOLERANCE * np.maximum(1.0, np.where(np.isfinite(self.tau_max), self.tau_max, 1.0))
         out_of_limits = self.law.enforces_torque_limits and np.any(np.abs(tau) > self.tau_max + tolerance)
@@ -294,7 +243,7 @@ class Controller:
             return self._fallback(q, dq, STATUS_INVALID_OUTPUT, x)
         status, relaxed = STATUS_OK, []
         if self.nx:
-            check = check_bounds(self.law.qp, data["A"], data["lba"].ravel(), data["uba"].ravel(), x)
+            check = check_bounds(self._structure.bound_rows, data["A"], data["lba"].ravel(), data["uba"].ravel(), x)
             if not check.holds:
                 status, relaxed = STATUS_LIMITS_RELAXED, [self.bound_names[i] for i in check.violated]
         ddq = data["ddq0"].ravel() + data["Q"] @ x

@@ -251,33 +251,6 @@ def check_gives_way(robot, levels, recs):
 
 PARAMS = [(robot, levels) for robot in ROBOTS for levels in LEVEL_COUNTS]
 
-# Controller failures measured at commit 9b3c3fb (dcts as a lexicographic QP, DAQP 0.11
-# hierarchical mode); the numbers are in the report. strict=False: they pass once the controller is fixed.
-_LEVELS_XFAIL = (
-    "dcts does not maximize the top level's scaling: e.g. iiwa14/2 levels state #3 s1 = 0.88422 vs the "
-    "largest feasible 0.88737 (confirmed by a direct scipy linprog in a), panda/2 #62 s1 = 0 vs 0.2956, "
-    "panda/3 #46 s1 = 0 vs 0.2570; 3-19 of 60-76 feasible states per case disagree, worst relative "
-    "level error 0.12-1.46 (status 0 on all of them)"
-)
-_GIVES_WAY_XFAIL = (
-    "follows from the under-scaled top level: a higher level gives way than the lexicographic optimum "
-    "needs, 1-6 states per case (e.g. panda/2 #62: level 1 scaled to 0 while the reference meets it at s = 0.2956)"
-)
-_BOUNDS_XFAIL = {
-    ("iiwa14", 2): "state #44: status 0 with a hard bound violated by 2.9e-6 (relative)",
-    ("ur5", 3): "state #49: status 0 with joint acceleration bounds ddq[2], ddq[5] violated by 3.3e-6 (relative)",
-}
-
-
-def _xfail(params, reason):
-    """params with an xfail mark where reason (a string, or a function of the params) is not empty."""
-    out = []
-    for p in params:
-        why = reason(p) if callable(reason) else reason
-        out.append(pytest.param(*p, marks=pytest.mark.xfail(reason=why, strict=False)) if why else p)
-    return out
-
-
 @pytest.mark.parametrize(("robot", "levels"), PARAMS)
 def test_bounds_are_active(robot, levels):
     """Premise: the states make torque, joint and Cartesian bounds bind in the reference's solution."""
@@ -297,24 +270,21 @@ def test_status_never_fallback(robot, levels):
     check_status(robot, levels, records(robot, levels))
 
 
-@pytest.mark.parametrize(("robot", "levels"), _xfail(PARAMS, lambda p: _BOUNDS_XFAIL.get(p, "")))
+@pytest.mark.parametrize(("robot", "levels"), PARAMS)
 def test_hard_bounds_hold_when_status_ok(robot, levels):
     check_bounds_when_ok(robot, levels, records(robot, levels))
 
 
-@pytest.mark.parametrize(("robot", "levels"), _xfail(PARAMS, _LEVELS_XFAIL))
+@pytest.mark.parametrize(("robot", "levels"), PARAMS)
 def test_levels_match_lexicographic_reference(robot, levels):
     check_levels(robot, levels, records(robot, levels))
 
 
-@pytest.mark.parametrize(("robot", "levels"), _xfail(PARAMS, lambda p: "" if p == ("ur5", 3) else _GIVES_WAY_XFAIL))
+@pytest.mark.parametrize(("robot", "levels"), PARAMS)
 def test_lowest_level_gives_way_first(robot, levels):
     check_gives_way(robot, levels, records(robot, levels))
 
 
-@pytest.mark.xfail(strict=False, reason=(
-    "every state the reference proves infeasible (LP margin < 0; 24-40 of 100 per case) gets status -2 "
-    "(solver failed, fallback torque) instead of 1 (limits relaxed)"))
 @pytest.mark.parametrize(("robot", "levels"), PARAMS)
 def test_infeasible_states_are_relaxed_not_fallback(robot, levels):
     """On states where no a satisfies every hard row, the joint/Cartesian bounds give way (status 1)."""
@@ -326,7 +296,7 @@ def test_infeasible_states_are_relaxed_not_fallback(robot, levels):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize(("robot", "levels"), _xfail(PARAMS, _LEVELS_XFAIL))
+@pytest.mark.parametrize(("robot", "levels"), PARAMS)
 def test_slow_against_lexicographic_reference(robot, levels):
     recs = records(robot, levels, N_SLOW, 1)
     for check in (check_status, check_bounds_when_ok, check_levels, check_gives_way):

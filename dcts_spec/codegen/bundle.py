@@ -23,8 +23,9 @@ import numpy as np
 from ..controller import ACTIVE_TOLERANCE, DATA_OUTPUTS, TORQUE_TOLERANCE, Controller
 from ..formulations.qp import BOUNDS, HARD
 from ..solve import BOUND_TOLERANCE, DAQP_SETTINGS
+from ..solve import lexicographic
 from ..spec import Spec
-from .layout import C_DATA_OUTPUTS, array_lengths, casadi_work_lengths, workspace_struct
+from .layout import C_DATA_OUTPUTS, array_lengths, casadi_work_lengths, header_fields, workspace_fields, workspace_struct
 from .model import describe_changes, model_record
 from .states import State, golden_states
 
@@ -401,9 +402,12 @@ def generate_sources(
     qp = controller.law.qp
     nr = len(controller.bound_names) if qp is not None else 0
     npls = 0 if controller.law.least_squares_task is None else int(controller.law.least_squares_task[0].shape[0])
-    points = qp.break_points() if qp is not None else [0]
-    points_relaxed = qp.break_points(relaxed=True) if qp is not None else [0]
-    solver_bytes = SOLVER_STORAGE_BYTES
+    priorities = qp.priorities if qp is not None else []
+    bends = [p.bend for p in priorities]
+    if any(list(b) != list(range(b[0], b[0] + len(b))) for b in bends) or any(
+            a[-1] + 1 != b[0] for a, b in zip(bends, bends[1:])):
+        raise CodegenError("the C cascade expects each level's bend in consecutive variables")
+    solver_bytes = SOLVER_STORAGE_BYTES * (2 if nr else 1)
     tau_max = np.asarray(controller.tau_max, dtype=float)
     damping = controller.problem.vector("fallback_damping")
     digest = spec_digest(spec, spec_bytes)
@@ -413,11 +417,11 @@ def generate_sources(
 
     settings = daqp_settings()
     work = generate_casadi(controller, name, directory)
-    length = array_lengths(nx, na, levels, nref, nr, npls, len(points_relaxed))
+    length = array_lengths(nx, na, levels, nref, nr, npls)
     work_length = casadi_work_lengths(work)
     layout_text, layout_macros = _ref_layout_text(controller, big)
-    workspace_bytes = ctypes.sizeof(workspace_struct(n, nref, nx, na, levels, work, solver_bytes, nr, npls,
-                                                     len(points_relaxed)))
+    fields = workspace_fields(n, nref, nx, na, levels, work, nr, npls)
+    workspace_bytes = ctypes.sizeof(workspace_struct(fields, solver_bytes))
     if nx:
         init_note = (
             f" * {name}_init allocates DAQP's factorization and hierarchy arrays once, with malloc\n"
@@ -425,7 +429,7 @@ def generate_sources(
         )
         init_short = "Allocates DAQP's arrays (malloc), once."
         daqp_note = (f" and DAQP {DAQP_VERSION} (its C sources in daqp/; QP with {nx} variables, {na} general "
-                     f"constraints in {len(points)} priority levels)")
+                     f"constraints, {len(priorities)} priority levels)")
     else:
         init_note = f" * {name}_init allocates nothing (closed-form law: no QP)."
         init_short = "Allocates nothing (closed form)."
@@ -456,10 +460,18 @@ def generate_sources(
         **{f"{key.upper()}_ALLOC": value for key, value in length.items()},
         "NR": nr,
         "NP": npls,
-        "NH": len(points),
-        "NH_RELAXED": len(points_relaxed),
-        "BREAK_POINTS": ", ".join(str(p) for p in points),
-        "BREAK_POINTS_RELAXED": ", ".join(str(p) for p in points_relaxed),
+        "NPRIORITIES": len(priorities),
+        "PRIORITY_SCALING": ", ".join(str(p.scaling) for p in priorities) + (", 0" if priorities else "0"),
+        "PRIORITY_BEND": ", ".join(str(b[0]) for b in bends) + (f", {bends[-1][-1] + 1}" if bends else "0"),
+        "SCALE_STEP": c_double(lexicographic.SCALE_STEP),
+        "BEND_STEP": c_double(lexicographic.BEND_STEP),
+        "PROXIMAL_ITERATIONS": lexicographic.PROXIMAL_ITERATIONS,
+        "PROXIMAL_TOLERANCE": c_double(lexicographic.PROXIMAL_TOLERANCE),
+        "MAX_EXTRAPOLATION": c_double(lexicographic.MAX_EXTRAPOLATION),
+        "EXTRAPOLATION_MARGIN": c_double(lexicographic.EXTRAPOLATION_MARGIN),
+        "RELAX_MARGIN": c_double(lexicographic.RELAX_MARGIN),
+        "MAX_STAGE_SOLVES": lexicographic.PROXIMAL_ITERATIONS,
+        "WORKSPACE_FIELDS": header_fields(fields),
         "HARD_END": qp.rows_of(HARD).stop if qp is not None else 0,
         "BOUNDS_END": (qp.rows_of(HARD).stop + nr) if qp is not None else 0,
         "BOUND_TOLERANCE": c_double(BOUND_TOLERANCE),
@@ -539,8 +551,7 @@ def generate_sources(
         "variables": list(qp.variables) if qp is not None else [],
         "bound_names": controller.bound_names if qp is not None else [],
         "least_squares_rows": npls,
-        "break_points": points,
-        "break_points_relaxed": points_relaxed,
+        "priority_variables": [[p.scaling, list(p.bend)] for p in priorities],
         "enforces_torque_limits": bool(controller.law.enforces_torque_limits),
         "tau_max": [float(v) for v in tau_max],
         "fallback_damping": [float(v) for v in damping],

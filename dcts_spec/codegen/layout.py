@@ -12,13 +12,14 @@ import ctypes
 C_DATA_OUTPUTS = ("H", "f", "A_rowmajor", "bl", "bu", "tau0", "T", "ddq0", "Q", "s0", "S", "p0", "P")
 
 
-def array_lengths(nx: int, na: int, nlevels: int, nref: int, nr: int, np_: int, nh: int) -> dict[str, int]:
+def array_lengths(nx: int, na: int, nlevels: int, nref: int, nr: int, np_: int) -> dict[str, int]:
     """Lengths of the structs' arrays (the header's `*_ALLOC`): at least 1, as C99 has no empty
-    arrays. nr: joint/Cartesian bound rows; np_: rows of an over-constrained lowest level; nh:
-    DAQP break points."""
+    arrays. nr: joint/Cartesian bound rows; np_: rows of an over-constrained lowest level. The
+    relaxation has one slack per bound row: NX + NR variables and NA + NR rows."""
     return {
         "nref": max(nref, 1), "nx": max(nx, 1), "na": max(na, 1), "nc": max(nx + na, 1), "nlevels": max(nlevels, 1),
-        "nr": max(nr, 1), "np": max(np_, 1), "nh": max(nh, 1),
+        "nr": max(nr, 1), "np": max(np_, 1),
+        "nx2": max(nx + nr, 1), "na2": max(na + nr, 1), "nc2": max(nx + na + 2 * nr, 1),
     }
 
 
@@ -51,12 +52,98 @@ def info_struct(nq: int, nlevels: int, nx: int, nr: int) -> type[ctypes.Structur
     return Info
 
 
-def workspace_struct(nq: int, nref: int, nx: int, na: int, nlevels: int, casadi_work: dict,
-                     solver_bytes: int, nr: int, np_: int, nh: int) -> type[ctypes.Structure]:
-    length = array_lengths(nx, na, nlevels, nref, nr, np_, nh)
+def workspace_fields(nq: int, nref: int, nx: int, na: int, nlevels: int, casadi_work: dict, nr: int,
+                     np_: int) -> list[tuple[str, str, int, str]]:
+    """The workspace struct's fields before DAQP's storage: (name, C type, count, comment), for the
+    generated header (`header_fields`) and its ctypes mirror (`workspace_struct`) alike."""
+    n = array_lengths(nx, na, nlevels, nref, nr, np_)
     work = casadi_work_lengths(casadi_work)
-    d, i = ctypes.c_double, ctypes.c_int
-    nxa, nc = length["nx"], length["nc"]
+    nxa, nc, nx2 = n["nx"], n["nc"], n["nx2"]
+    return [
+        ("magic", "unsigned long", 0, "set by init"),
+        ("arg", "const double *", work["arg"], "CasADi work vectors"),
+        ("res", "double *", work["res"], ""),
+        ("iw", "long long", work["iw"], ""),
+        ("w", "double", work["w"], ""),
+        ("H", "double", nxa * nxa, "QP data: min 1/2 x'Hx + f'x s.t. bl <= [x; A x] <= bu (A row-major)"),
+        ("f", "double", nxa, ""),
+        ("A", "double", n["na"] * nxa, ""),
+        ("bl", "double", nc, ""),
+        ("bu", "double", nc, ""),
+        ("tau0", "double", nq, "tau = tau0 + T x, ddq = ddq0 + Q x, scaling = s0 + S x (column-major)"),
+        ("T", "double", nq * nxa, ""),
+        ("ddq0", "double", nq, ""),
+        ("Q", "double", nq * nxa, ""),
+        ("s0", "double", n["nlevels"], ""),
+        ("S", "double", n["nlevels"] * nxa, ""),
+        ("p0", "double", n["np"], "over-constrained lowest level: task acceleration p0 + P x"),
+        ("P", "double", n["np"] * nxa, ""),
+        ("x", "double", nxa, "the solution"),
+        ("x_free", "double", nxa, "the solution without torque limits and bounds (p0 + P x)"),
+        ("lba", "double", n["na"], "the cascade: row bounds (widened when relaxed)"),
+        ("uba", "double", n["na"], ""),
+        ("nominal", "double", nxa, "every level met"),
+        ("lbx_w", "double", nxa, "variable bounds with the levels fixed so far"),
+        ("ubx_w", "double", nxa, ""),
+        ("lbx_f", "double", nxa, ""),
+        ("ubx_f", "double", nxa, ""),
+        ("lbx_n", "double", nxa, ""),
+        ("ubx_n", "double", nxa, ""),
+        ("weights", "double", nxa, "a stage's objective"),
+        ("linear", "double", nxa, ""),
+        ("xs", "double", nxa, ""),
+        ("xb", "double", nxa, ""),
+        ("witness", "double", nxa, ""),
+        ("center", "double", nx2, "proximal steps"),
+        ("direction", "double", nx2, ""),
+        ("trial", "double", nx2, ""),
+        ("Hq", "double", nxa * nxa, "DAQP's arrays of the QP"),
+        ("fq", "double", nxa, ""),
+        ("lo", "double", nc, ""),
+        ("hi", "double", nc, ""),
+        ("sense", "int", nc, ""),
+        ("xq", "double", nxa, ""),
+        ("A2", "double", n["na2"] * nx2, "the relaxation: one slack per bound row"),
+        ("lba2", "double", n["na2"], ""),
+        ("uba2", "double", n["na2"], ""),
+        ("lbx2", "double", nx2, ""),
+        ("ubx2", "double", nx2, ""),
+        ("nominal2", "double", nx2, ""),
+        ("weights2", "double", nx2, ""),
+        ("linear2", "double", nx2, ""),
+        ("xr", "double", nx2, ""),
+        ("H2", "double", nx2 * nx2, ""),
+        ("f2", "double", nx2, ""),
+        ("lo2", "double", n["nc2"], ""),
+        ("hi2", "double", n["nc2"], ""),
+        ("sense2", "int", n["nc2"], ""),
+        ("x2", "double", nx2, ""),
+        ("zeros", "double", nq, "fallback: the last finite q, the finite part of dq, the torque"),
+        ("last_q", "double", nq, ""),
+        ("dq_finite", "double", nq, ""),
+        ("fallback", "double", nq, ""),
+        ("have_last_q", "int", 0, ""),
+    ]
+
+
+def header_fields(fields: list[tuple[str, str, int, str]]) -> str:
+    """The fields as C declarations (count 0: a scalar)."""
+    lines = []
+    for name, ctype, count, comment in fields:
+        if comment:
+            lines.append(f"    /* {comment} */")
+        pointer = ctype.endswith("*")
+        decl = f"{ctype}{'' if pointer else ' '}{name}" + (f"[{count}]" if count else "")
+        lines.append(f"    {decl};")
+    return "\n".join(lines)
+
+
+_CTYPES = {"double": ctypes.c_double, "int": ctypes.c_int, "long long": ctypes.c_longlong,
+           "unsigned long": ctypes.c_ulong, "const double *": ctypes.c_void_p, "double *": ctypes.c_void_p}
+
+
+def workspace_struct(fields: list[tuple[str, str, int, str]], solver_bytes: int) -> type[ctypes.Structure]:
+    """The ctypes mirror of the generated workspace (fields from `workspace_fields`)."""
 
     class Solver(ctypes.Union):
         _fields_ = [
@@ -67,22 +154,7 @@ def workspace_struct(nq: int, nref: int, nx: int, na: int, nlevels: int, casadi_
         ]
 
     class Workspace(ctypes.Structure):
-        _fields_ = [
-            ("magic", ctypes.c_ulong),
-            ("arg", ctypes.c_void_p * work["arg"]),
-            ("res", ctypes.c_void_p * work["res"]),
-            ("iw", ctypes.c_longlong * work["iw"]),
-            ("w", d * work["w"]),
-            ("H", d * (nxa * nxa)), ("f", d * nxa), ("A", d * (length["na"] * nxa)),
-            ("bl", d * nc), ("bu", d * nc), ("sense", i * nc),
-            ("tau0", d * nq), ("T", d * (nq * nxa)), ("ddq0", d * nq), ("Q", d * (nq * nxa)),
-            ("s0", d * length["nlevels"]), ("S", d * (length["nlevels"] * nxa)), ("x", d * nxa),
-            ("bl0", d * nc), ("bu0", d * nc), ("f0", d * nxa), ("bp", i * length["nh"]),
-            ("p0", d * length["np"]), ("P", d * (length["np"] * nxa)), ("x_free", d * nxa),
-            ("bl_free", d * nc), ("bu_free", d * nc),
-            ("zeros", d * nq), ("last_q", d * nq), ("dq_finite", d * nq), ("fallback", d * nq),
-            ("have_last_q", i),
-            ("solver", Solver),
-        ]
+        _fields_ = [(name, _CTYPES[ctype] * count if count else _CTYPES[ctype]) for name, ctype, count, _ in fields]
+        _fields_ += [("solver", Solver)]
 
     return Workspace

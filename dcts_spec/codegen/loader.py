@@ -11,7 +11,7 @@ import numpy as np
 from ..controller import STATUS_INVALID_OUTPUT, StepResult
 from ..tasks import ReferenceInput
 from .bundle import CodegenError
-from .layout import info_struct, workspace_struct
+from .layout import info_struct, workspace_fields, workspace_struct
 
 
 class CompiledController:
@@ -57,9 +57,9 @@ class CompiledController:
         levels = len(self.priorities)
         self.bound_names: list[str] = list(m["bound_names"])
         self._Info = info_struct(self.n, levels, self.nx, len(self.bound_names))
-        workspace = workspace_struct(self.n, self.ref_size, self.nx, self.na, levels, m["casadi_work"],
-                                     m["solver_storage_bytes"], len(self.bound_names), m["least_squares_rows"],
-                                     len(m["break_points_relaxed"]))
+        fields = workspace_fields(self.n, self.ref_size, self.nx, self.na, levels, m["casadi_work"],
+                                  len(self.bound_names), m["least_squares_rows"])
+        workspace = workspace_struct(fields, m["solver_storage_bytes"])
         self.workspace_bytes = int(self._lib_fn("workspace_size")())
         if self.workspace_bytes != ctypes.sizeof(workspace) or self._lib_fn("info_size")() != ctypes.sizeof(self._Info):
             raise CodegenError(f"{library}: struct sizes differ from the manifest's (stale build?)")

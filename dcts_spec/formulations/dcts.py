@@ -10,14 +10,13 @@ tolerance. dcts solves it lexicographically instead (`qp.py`), in hierarchy coor
     a(x) = hierarchy(v₁ … v_k) + Z z,     vᵢ = sᵢ ẍ_d,ᵢ + δᵢ,     range(Z) = range(N_k)
 
 so level i's task acceleration is exactly Jᵢ a + J̇ᵢq̇ = vᵢ, whatever the other levels do, and
-x = (s, δ, z). The levels of the QP, highest first:
+x = (s, δ, z). The lexicographic solve (`solve/lexicographic.py`) then fixes, highest first:
 
-    0      0 ≤ sᵢ ≤ 1, |τ(x)| ≤ τ_max                                     hard
-    1      joint and Cartesian acceleration bounds                         least violation
-    i.a    δᵢ = 0        least squares: the smallest bend of priority i (task units)
-    i.b    sᵢ = 1        least squares: then the largest scaling of priority i
+    0      |τ(x)| ≤ τ_max and the joint/Cartesian bounds                       hard
+    i      level i: the largest scaling sᵢ ∈ [0, 1] with δᵢ = 0; only if none is feasible,
+           the smallest bend ‖δᵢ‖² (task units), then the largest scaling with it
     last   ½‖a − a₀‖²_M over the freedom left (z): the acceleration energy ½(τ − g)ᵀM⁻¹(τ − g);
-           with an over-constrained lowest level (a posture), ‖J a(x) + J̇q̇ − ẍ_d‖² first
+           with an over-constrained lowest level (a posture), ½‖J a(x) + J̇q̇ − ẍ_d‖² first
 
 So a level is first *scaled* (direction kept, sᵢ reported) and only bent when no scaling in
 [0, 1] is feasible, and it is optimal given every level above it, exactly. With no bound active
@@ -25,9 +24,6 @@ the optimum is s = 1, δ = 0 and the energy-optimal z: the closed-form dynamical
 hierarchy (P2) with a passive null space (P3). The over-constrained lowest level aims at the
 acceleration the levels above actually get, and has no scaling variable (a free s would be
 chosen to fit its least squares and slow a posture down even in free motion).
-
-DAQP measures each row's violation after normalizing the row in the H⁻¹ metric; the δᵢ rows are
-unit rows on variables with equal curvature (W), so the bend is least squares in task units.
 """
 
 from __future__ import annotations
@@ -37,13 +33,7 @@ import casadi as ca
 from ..symbolic.linalg import null_space_basis
 from .hierarchy import least_squares_objective, level_structure, recursive_hierarchy
 from .problem import ControlProblem
-from .qp import INF, Affine, ControlLaw, TaskRows, with_limits
-
-# Curvature of s and δ in the final objective. They are fixed by their own levels before it, so
-# W only conditions the solve; it must dominate the posture's least squares coupling to them so
-# that the δ rows keep equal norms in DAQP's metric (see above).
-LEVEL_CURVATURE = 1e6
-
+from .qp import INF, Affine, ControlLaw, PriorityVariables, with_limits
 
 def dcts(problem: ControlProblem) -> ControlLaw:
     """The DCTS lexicographic QP with torque, joint and Cartesian bounds."""
@@ -60,19 +50,14 @@ def dcts(problem: ControlProblem) -> ControlLaw:
     variables += [f"z[{j}]" for j in range(nz)]
     z = list(range(nx - nz, nx))
 
-    commands, tasks = [], []
+    commands, priorities = [], []
     start = k
     for i, lv in enumerate(exact):
         matrix = ca.SX(lv.dim, nx)
         matrix[:, i] = lv.target
         matrix[:, start : start + lv.dim] = ca.SX.eye(lv.dim)
         commands.append(Affine(ca.SX.zeros(lv.dim), matrix))
-        bend = ca.SX(lv.dim, nx)
-        bend[:, start : start + lv.dim] = ca.SX.eye(lv.dim)
-        tasks.append(TaskRows(f"priority {lv.priority}", bend, ca.SX.zeros(lv.dim), ca.SX.zeros(lv.dim)))
-        unit = ca.SX(1, nx)
-        unit[0, i] = 1.0
-        tasks.append(TaskRows(f"priority {lv.priority} scaling", unit, ca.SX(1.0), ca.SX(1.0)))
+        priorities.append(PriorityVariables(lv.priority, i, list(range(start, start + lv.dim))))
         start += lv.dim
 
     a, _ = recursive_hierarchy(problem, commands, nx)
@@ -80,8 +65,8 @@ def dcts(problem: ControlProblem) -> ControlLaw:
     H = ca.SX(nx, nx)
     f = ca.SX(nx, 1)
     for i in range(k + sum(dims)):
-        H[i, i] = LEVEL_CURVATURE
-    f[:k] = -LEVEL_CURVATURE  # ½W(s − 1)²
+        H[i, i] = 1.0  # s and δ are fixed by their levels before this objective: it only needs H ≻ 0
+    f[:k] = -1.0
     notes = []
     if nz:
         # The freedom left by the exact levels is null([J₁; …; J_k]) = range(N_k); a basis of it
@@ -100,7 +85,7 @@ def dcts(problem: ControlProblem) -> ControlLaw:
 
     lbx = [0.0] * k + [-INF] * (nx - k)
     ubx = [1.0] * k + [INF] * (nx - k)
-    qp, torque = with_limits(problem, acceleration, H, f, lbx, ubx, variables, tasks)
+    qp, torque = with_limits(problem, acceleration, H, f, lbx, ubx, variables, priorities)
     scaling = Affine(ca.SX.zeros(len(levels)), ca.SX(len(levels), nx))
     for i in range(k):
         scaling.matrix[i, i] = 1.0

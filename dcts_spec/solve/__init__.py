@@ -1,5 +1,13 @@
-"""Solving a formulation's QP: the lexicographic solve and the checks that make a status a guarantee."""
+"""Solving a formulation's QP: the lexicographic cascade and the checks that make a status a guarantee."""
 
-from .lexicographic import BOUND_TOLERANCE, DAQP_SETTINGS, BoundCheck, check_bounds, solve_lexicographic
+from .lexicographic import (
+    BOUND_TOLERANCE,
+    DAQP_SETTINGS,
+    BoundCheck,
+    Solution,
+    Structure,
+    check_bounds,
+    solve_lexicographic,
+)
 
-__all__ = ["BOUND_TOLERANCE", "DAQP_SETTINGS", "BoundCheck", "check_bounds", "solve_lexicographic"]
+__all__ = ["BOUND_TOLERANCE", "DAQP_SETTINGS", "BoundCheck", "Solution", "Structure", "check_bounds", "solve_lexicographic"]

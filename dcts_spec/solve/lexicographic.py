@@ -1,13 +1,31 @@
-"""The lexicographic solve of a QP's row levels with DAQP's hierarchical mode, and its check.
+"""The lexicographic solve: a cascade of ordinary QPs solved by DAQP, and the check of its bounds.
 
-DAQP (≥ 0.11) takes the levels as `break_points`: the first level is hard; each level below
-minimizes the squared violation of its rows without increasing that of any level above, with
-proximal iterations that remove the bias of its soft-constraint penalty, so each level is
-optimal given the levels above (not approximately, through weights); what freedom is left
-minimizes ½xᵀHx + fᵀx. The generated C calls the same DAQP sources the same way.
+The QP's priority levels are groups of variables (`formulations/qp.py`): level i's scaling sᵢ
+and bend δᵢ, its task acceleration being sᵢ ẍ_d,ᵢ + δᵢ whatever the other variables are. Fixing
+a level therefore means fixing its variables (lb = ub), and the cascade is:
 
-A solver's exit flag is not evidence: `check_bounds` verifies the joint and Cartesian bounds on
-the unscaled data, in their own units (rad/s², m/s²), after every solve.
+  1. every level at its nominal value (s = 1, δ = 0) and ½xᵀHx + fᵀx over the rest: if this QP
+     is feasible it is the lexicographic optimum (every level met). One solve: the usual case.
+  2. otherwise, for each level i, highest first, with the levels above fixed:
+       scale:  max sᵢ with δᵢ fixed (0), the levels below free;
+       bend:   only if no sᵢ ∈ [0, 1] is feasible: min ‖δᵢ‖², then scale again;
+     then the remaining levels nominal (as in 1): if feasible, done.
+  3. if even the highest level cannot be bent into feasibility, the torque limits cannot hold the
+     joint/Cartesian bounds: `relax` violates each as little as they allow (one slack per
+     bound, min ½‖σ‖²), those bounds are widened to what was achieved, and 1–2 run again.
+
+A stage's objective is linear in its level (max sᵢ) or only sees it (min ‖δᵢ‖²); the other
+variables just have to exist, and DAQP needs a positive definite Hessian. So each stage runs the
+proximal-point method: a few QPs min φ(x)/ρ + ½‖x − c‖², each centred at the previous answer.
+It converges to an exact minimizer of φ (for a linear φ in finitely many steps) while every QP
+stays well conditioned (a tiny fixed weight on ‖x − c‖² instead would make the Hessian's
+condition number ~1e8, and DAQP then returned "optimal" with a torque limit crossed by 0.09 Nm
+and called feasible stages infeasible). Each QP is an ordinary one, which DAQP solves exactly
+(it refines its primal solution); its hierarchical mode (`break_points`) was measured to miss
+the largest feasible scaling and to cross hard rows in ill-conditioned states (see
+docs/formulations.md).
+
+The generated C code runs the same cascade on the same DAQP.
 """
 
 from __future__ import annotations
@@ -17,40 +35,223 @@ from dataclasses import dataclass
 import daqp
 import numpy as np
 
-from ..formulations.qp import BOUNDS, QP
-
 # Both runtimes: a primal tolerance tighter than DAQP's 1e-6, so that bounds hold to ~1e-8 in
-# the scaled problem, and a bounded iteration count (all levels and proximal steps together).
-DAQP_SETTINGS = {"primal_tol": 1e-8, "iter_limit": 1000}
+# the scaled problem; a bounded iteration count; no elimination of equalities (it allocates).
+DAQP_SETTINGS = {"primal_tol": 1e-8, "iter_limit": 1000, "eq_reduction": -1}
 DAQP_INF = 1e30  # DAQP's "no bound"
+DAQP_EQUALITY = 5  # sense: active and immutable
+# The proximal-point stages (see Cascade._proximal): step ρ, at most this many solves, and when
+# a step is small enough (relative) to stop. The scaling's objective is linear: its Hessian stays
+# the identity whatever ρ, and a long step reaches the largest scaling at once. The bend's
+# weight 1/ρ enters the Hessian: a moderate ρ keeps it well conditioned, at the price of a few
+# more steps.
+SCALE_STEP = 1e-8
+BEND_STEP = 1e-5
+MAX_EXTRAPOLATION = 1e6
+RELAX_MARGIN = 1e-7  # relative: a relaxed bound is widened this much beyond what was achieved
+EXTRAPOLATION_MARGIN = 1e-9
+PROXIMAL_ITERATIONS = 30
+PROXIMAL_TOLERANCE = 1e-10
 # A joint or Cartesian acceleration bound holds if it is crossed by at most this much, relative
 # to max(1, |bound|) (rad/s² or m/s²): over a 1 ms period ~5e-13 m or rad of position.
 BOUND_TOLERANCE = 1e-6
 
 
-def solve_lexicographic(
-    H: np.ndarray, f: np.ndarray, A: np.ndarray, lower: np.ndarray, upper: np.ndarray, break_points: list[int]
-) -> tuple[np.ndarray | None, int, int]:
-    """x of the lexicographic QP (None if DAQP failed), DAQP's exit flag and iteration count.
+@dataclass(frozen=True)
+class Structure:
+    """Where the solve finds what it fixes: the rows of A that are joint/Cartesian bounds, and the
+    (scaling, bend) variables of each priority level, highest first."""
 
-    `lower` and `upper` are DAQP's: the nx variable bounds, then the rows of A."""
+    bound_rows: range
+    priorities: tuple[tuple[int, tuple[int, ...]], ...]
+
+
+@dataclass
+class Solution:
+    x: np.ndarray
+    relaxed: bool  # the joint/Cartesian bounds had to be widened (status "limits relaxed")
+    solves: int
+
+
+def daqp_qp(H, f, A, lower, upper) -> tuple[np.ndarray | None, int]:
+    """One ordinary QP: min ½xᵀHx + fᵀx, lower ≤ [x; Ax] ≤ upper (equal ends: an equality).
+    Returns x (None if DAQP found no solution) and its exit flag."""
     lower = np.clip(lower, -DAQP_INF, DAQP_INF)
     upper = np.clip(upper, -DAQP_INF, DAQP_INF)
-    sense = np.zeros(lower.size, dtype=np.intc)
-    x, _, exitflag, info = daqp.solve(
-        np.ascontiguousarray(H), np.ascontiguousarray(f), np.ascontiguousarray(A), upper, lower, sense,
-        break_points=np.asarray(break_points, dtype=np.intc), **DAQP_SETTINGS,
-    )
-    if exitflag < 1 or not np.all(np.isfinite(x)):
-        return None, int(exitflag), int(info["iterations"])
-    return np.asarray(x, dtype=float), int(exitflag), int(info["iterations"])
+    sense = np.where(lower == upper, DAQP_EQUALITY, 0).astype(np.intc)
+    x, _, flag, _ = daqp.solve(np.ascontiguousarray(H), np.ascontiguousarray(f), np.ascontiguousarray(A),
+                               upper, lower, sense, **DAQP_SETTINGS)
+    if flag != 1 or not np.all(np.isfinite(x)):
+        return None, int(flag)
+    return np.asarray(x, dtype=float), int(flag)
+
+
+class Cascade:
+    """The stages of one lexicographic solve on numeric (scaled) QP data."""
+
+    def __init__(self, H, f, A, lbx, ubx, lba, uba, structure: Structure):
+        self.H, self.f, self.A = H, f, A
+        self.lbx, self.ubx = lbx.copy(), ubx.copy()
+        self.lba, self.uba = lba.copy(), uba.copy()
+        self.structure = structure
+        self.solves = 0
+        nominal = np.zeros(lbx.size)
+        for s, _ in structure.priorities:
+            nominal[s] = ubx[s]  # s = 1 (scaled)
+        self.nominal = nominal
+
+    def _solve(self, H, f, lbx, ubx) -> np.ndarray | None:
+        self.solves += 1
+        x, _ = daqp_qp(H, f, self.A, np.concatenate([lbx, self.lba]), np.concatenate([ubx, self.uba]))
+        return x
+
+    def _fixed(self, upto: int, lbx, ubx, rest_nominal: bool) -> tuple[np.ndarray, np.ndarray]:
+        """Bounds with the levels [0, upto) as they are in lbx/ubx, and the others nominal if asked."""
+        lo, hi = lbx.copy(), ubx.copy()
+        if rest_nominal:
+            for s, bend in self.structure.priorities[upto:]:
+                lo[s] = hi[s] = self.nominal[s]
+                lo[list(bend)] = hi[list(bend)] = 0.0
+        return lo, hi
+
+    def final(self, upto: int, lbx, ubx) -> np.ndarray | None:
+        """½xᵀHx + fᵀx with the levels below `upto` nominal."""
+        lo, hi = self._fixed(upto, lbx, ubx, rest_nominal=True)
+        return self._solve(self.H, self.f, lo, hi)
+
+    def _proximal(self, weights: np.ndarray, linear: np.ndarray, step: float, lbx, ubx) -> np.ndarray | None:
+        """min φ(x) = ½Σwⱼxⱼ² + linearᵀx over the feasible set, by the proximal-point method:
+        x = argmin φ(x)/ρ + ½‖x − c‖² (scaled variables), a fixed point of which minimizes φ.
+
+        While the active set stays the same the iterates move along one direction d = x − c, so
+        the next centre is extrapolated along it, up to the first constraint it meets or the
+        minimum of φ on the ray: an active-set step, which ends the iteration in a few solves.
+        A quadratic φ makes the Hessian I + diag(w)/ρ ill-conditioned for a small ρ, and DAQP then
+        fails on the thin feasible sets the levels above leave; so ρ starts at 1 and shrinks
+        tenfold per step down to `step`, and a failed solve returns the last iterate (feasible,
+        and as close to the minimum as DAQP could go)."""
+        rho = step if not weights.any() else 1.0
+        center, x = self.nominal, None
+        for _ in range(PROXIMAL_ITERATIONS):
+            solved = self._solve(np.diag(1.0 + weights / rho), linear / rho - center, lbx, ubx)
+            if solved is None:
+                return x
+            x = solved
+            d = x - center
+            if np.linalg.norm(d) <= PROXIMAL_TOLERANCE * (1.0 + np.linalg.norm(x)):
+                return x
+            center = x + self._extrapolation(x, d, weights, linear, lbx, ubx) * d
+            rho = max(0.1 * rho, step)
+        return x
+
+    def _extrapolation(self, x, d, weights, linear, lbx, ubx) -> float:
+        """The largest t ≥ 0 keeping x + t d feasible, capped at the minimum of φ along it. The
+        rows x is on move along d up to rounding: they get a margin, or they would block at once
+        (the centre need not be feasible: the next proximal step projects it)."""
+        slope, curvature = float((weights * x + linear) @ d), float(weights * d @ d)
+        t = -slope / curvature if curvature > 0 else MAX_EXTRAPOLATION
+        t = min(max(t, 0.0), MAX_EXTRAPOLATION)
+        for value, rate, lo, hi in ((x, d, lbx, ubx), (self.A @ x, self.A @ d, self.lba, self.uba)):
+            margin = EXTRAPOLATION_MARGIN * np.maximum(1.0, np.minimum(np.abs(lo), np.abs(hi)))
+            with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+                up = np.where(rate > 0, (hi - value + margin) / rate, np.inf)
+                down = np.where(rate < 0, (lo - value - margin) / rate, np.inf)
+            t = min(t, float(np.min(up, initial=np.inf)), float(np.min(down, initial=np.inf)))
+        return max(t, 0.0)
+
+    def scale(self, level: int, lbx, ubx) -> np.ndarray | None:
+        """max s of `level` (its δ fixed in lbx/ubx), the levels below free."""
+        s, _ = self.structure.priorities[level]
+        linear = np.zeros(lbx.size)
+        linear[s] = -1.0 / self.nominal[s]
+        return self._proximal(np.zeros(lbx.size), linear, SCALE_STEP, lbx, ubx)
+
+    def bend(self, level: int, lbx, ubx) -> np.ndarray | None:
+        """min ‖δ‖² of `level` (its s free in [0, 1]), the levels below free."""
+        _, bend = self.structure.priorities[level]
+        weights = np.zeros(lbx.size)
+        weights[list(bend)] = 1.0
+        return self._proximal(weights, np.zeros(lbx.size), BEND_STEP, lbx, ubx)
+
+    def levels(self) -> np.ndarray | None:
+        """Steps 1–2 of the module docstring on the current bounds."""
+        x = self.final(0, self.lbx, self.ubx)
+        if x is not None or not self.structure.priorities:
+            return x
+        lbx, ubx = self.lbx.copy(), self.ubx.copy()
+        count = len(self.structure.priorities)
+        witness = None  # the last stage's solution: it meets every level fixed so far
+        for i, (s, bend) in enumerate(self.structure.priorities):
+            bend = list(bend)
+            free_lo, free_hi = lbx.copy(), ubx.copy()
+            lbx[bend] = ubx[bend] = 0.0
+            x = self.scale(i, lbx, ubx)
+            if x is None:
+                x = self.bend(i, free_lo, free_hi)
+                if x is None:  # infeasible: only possible for the first level, else DAQP failed
+                    return witness
+                lbx[bend] = ubx[bend] = x[bend]
+                scaled = self.scale(i, lbx, ubx)
+                x = x if scaled is None else scaled  # (the bend's solution witnesses a scaling)
+            witness = x
+            # fixed exactly: a band would let the levels below move it within the band, and in
+            # ill-conditioned states they gain far more than its width (a bend 40 % smaller for a
+            # band of 1e-7, measured); DAQP takes fixed variables as equalities
+            lbx[s] = ubx[s] = min(max(x[s], self.lbx[s]), self.ubx[s])
+            if i + 1 < count:
+                x = self.final(i + 1, lbx, ubx)
+                if x is not None:
+                    return x
+        x = self.final(count, lbx, ubx)
+        return witness if x is None else x
+
+    def relax(self) -> bool:
+        """Widen the bound rows as little as the torque limits allow: one slack σᵣ ≥ 0 per bound,
+        R x + σ ≥ lo and R x − σ ≤ hi, min ½‖σ‖² (a proximal stage, as the bend). Each bound is
+        then widened to what was achieved, plus RELAX_MARGIN (the next stages must not be left
+        a degenerate feasible set)."""
+        rows = self.structure.bound_rows
+        nx, r = self.lbx.size, len(rows)
+        if not r:
+            return False
+        R = self.A[rows.start : rows.stop]
+        other = np.delete(self.A, np.s_[rows.start : rows.stop], axis=0)
+        A = np.block([[other, np.zeros((other.shape[0], r))], [R, np.eye(r)], [R, -np.eye(r)]])
+        lo, hi = self.lba[rows.start : rows.stop], self.uba[rows.start : rows.stop]
+        lba = np.concatenate([np.delete(self.lba, np.s_[rows.start : rows.stop]), lo, np.full(r, -np.inf)])
+        uba = np.concatenate([np.delete(self.uba, np.s_[rows.start : rows.stop]), np.full(r, np.inf), hi])
+        slack = Cascade(np.eye(nx + r), np.zeros(nx + r), A, np.concatenate([self.lbx, np.zeros(r)]),
+                        np.concatenate([self.ubx, np.full(r, np.inf)]), lba, uba, Structure(range(0), ()))
+        slack.nominal = np.concatenate([self.nominal, np.zeros(r)])
+        weights = np.concatenate([np.zeros(nx), np.ones(r)])
+        x = slack._proximal(weights, np.zeros(nx + r), BEND_STEP, slack.lbx, slack.ubx)
+        self.solves += slack.solves
+        if x is None:
+            return False
+        value = R @ x[:nx]
+        margin = RELAX_MARGIN * np.maximum(1.0, np.abs(value))
+        self.lba[rows.start : rows.stop] = np.minimum(lo, value - margin)
+        self.uba[rows.start : rows.stop] = np.maximum(hi, value + margin)
+        return True
+
+
+def solve_lexicographic(H, f, A, lbx, ubx, lba, uba, structure: Structure) -> Solution | None:
+    """The lexicographic solution of a QP's priority levels (None if DAQP failed)."""
+    cascade = Cascade(H, f, A, lbx, ubx, lba, uba, structure)
+    x = cascade.levels()
+    if x is not None:
+        return Solution(x, False, cascade.solves)
+    if not cascade.relax():
+        return None
+    x = cascade.levels()
+    return None if x is None else Solution(x, True, cascade.solves)
 
 
 @dataclass
 class BoundCheck:
-    """Which joint/Cartesian acceleration bounds a solution crosses, worst first, and by how much."""
+    """Which joint/Cartesian acceleration bounds a solution crosses, and by how much."""
 
-    violated: list[int]  # indices into the bound rows
+    violated: list[int]  # indices into the bound rows, in row order
     violation: list[float]  # in the bound's own unit (rad/s² or m/s²)
 
     @property
@@ -58,14 +259,11 @@ class BoundCheck:
         return not self.violated
 
 
-def check_bounds(qp: QP, A: np.ndarray, lba: np.ndarray, uba: np.ndarray, x: np.ndarray) -> BoundCheck:
-    """Check the bound rows of the (unscaled) QP data at x."""
-    rows = qp.rows_of(BOUNDS)
-    value = A[rows.start : rows.stop] @ x
-    lo, hi = lba[rows.start : rows.stop], uba[rows.start : rows.stop]
+def check_bounds(bound_rows: range, A: np.ndarray, lba: np.ndarray, uba: np.ndarray, x: np.ndarray) -> BoundCheck:
+    """Check the bound rows of the QP data at x, in their own units."""
+    value = A[bound_rows.start : bound_rows.stop] @ x
+    lo, hi = lba[bound_rows.start : bound_rows.stop], uba[bound_rows.start : bound_rows.stop]
     excess = np.maximum(lo - value, value - hi)
     crossed = np.where(value < lo, lo, hi)
-    tolerance = BOUND_TOLERANCE * np.maximum(1.0, np.abs(crossed))
-    bad = np.flatnonzero(excess > tolerance)
-    order = bad[np.argsort(-excess[bad])]
-    return BoundCheck([int(i) for i in order], [float(excess[i]) for i in order])
+    bad = np.flatnonzero(excess > BOUND_TOLERANCE * np.maximum(1.0, np.abs(crossed)))
+    return BoundCheck([int(i) for i in bad], [float(excess[i]) for i in bad])
