@@ -76,8 +76,8 @@ def _spec(key: tuple) -> Spec:
 
 
 @functools.lru_cache(maxsize=None)
-def controller(key: tuple, formulation: str, solver: str | None = None) -> Controller:
-    return build_controller(_spec(key), formulation, solver)
+def controller(key: tuple, formulation: str) -> Controller:
+    return build_controller(_spec(key), formulation)
 
 
 def case_key(robot: str, case: str, controller_yaml: str = "") -> tuple:
@@ -338,9 +338,9 @@ def design(robot: str, which: str) -> tuple[tuple, State]:
     return ("text", text), st
 
 
-def _check_p4(robot: str, which: str, formulation: str = "dcts", solver: str | None = None):
+def _check_p4(robot: str, which: str, formulation: str = "dcts"):
     key, st = design(robot, which)
-    c = controller(key, formulation, solver)
+    c = controller(key, formulation)
     r, a = run(c, st)
     assert r.status == STATUS_OK, r.status
     bounds = check_bounds(c.robot, st.q, st.dq, r.tau, a, DT)
@@ -357,20 +357,19 @@ def test_p4_torque_limits_scale_lowest_priority_first(robot, which):
     _, _, levels = reference_solution(c.robot.model, tasks_of(key, c), st)
     residuals = level_residuals(levels, a)
     s = r.scaling
-    assert np.all(np.diff(s) <= 1e-6), f"scalings not ordered by priority: {s}"
     if which == "two_levels":
-        # Level 2 alone can absorb the conflict (see the design): level 1 keeps its full target.
-        # Priorities are weights, not lexicographic: a small δ₁ is almost free (its penalty is
-        # quadratic), so level 1 still bends by ~3e-6 m/s² (8e-6 relative) against 450 rad/s² on
-        # level 2; hence 1e-5 here, not the 1e-8 of P1.
-        assert s[0] >= 1 - 1e-6 and s[1] < 0.9, s
-        assert np.abs(residuals[0]).max() < 1e-5 * max(1.0, np.abs(levels[0][2]).max()), residuals[0]
+        # Level 2 alone can absorb the conflict (see the design): level 1 keeps its full target,
+        # exactly (lexicographic: the weights of the first version let it bend by 8e-6 relative).
+        assert s[0] >= 1 - 1e-9 and s[1] < 0.9, s
+        assert np.abs(residuals[0]).max() < 1e-8 * max(1.0, np.abs(levels[0][2]).max()), residuals[0]
     elif which in ("three_levels", "posture_last"):
-        assert s[0] >= 1 - 1e-6 and s[1] >= 1 - 1e-6 and s[2] < 0.9, s
+        assert s[0] >= 1 - 1e-9 and s[1] >= 1 - 1e-9 and s[2] < 0.9, s
         for i in (0, 1):
-            assert np.abs(residuals[i]).max() < 1e-5 * max(1.0, np.abs(levels[i][2]).max()), (i, residuals[i])
+            assert np.abs(residuals[i]).max() < 1e-8 * max(1.0, np.abs(levels[i][2]).max()), (i, residuals[i])
     else:
-        assert s[0] < 1 and s[1] <= s[0], s
+        # Level 1 alone does not fit: it is scaled; level 2 then gets what is left, which can be a
+        # larger share of its own target (no ordering of the scalings follows from the priorities).
+        assert s[0] < 1, s
 
 
 def test_p4_torque_designs_are_clear_cut():
@@ -480,30 +479,6 @@ def test_p5_joint_bounds_hold_on_actual_acceleration(robot, mode):
     else:
         assert commanded.violation() < BOUND_TOL, commanded
         assert actual.violation() > 1e-3, "ignoring τ_ext, the actual acceleration should break the bound"
-
-
-# -- DAQP against qpOASES --------------------------------------------------------------------------
-
-
-def _solver_pairs(robot: str) -> list[tuple[tuple, State]]:
-    key = case_key(robot, "a")
-    return [(key, st) for st in states_of(robot, "a", 15)] + [design(robot, w) for w in BOUND_DESIGNS + TORQUE_DESIGNS]
-
-
-@pytest.mark.parametrize("robot", ROBOTS)
-@pytest.mark.parametrize("formulation", QP_FORMULATIONS)
-def test_daqp_agrees_with_qpoases(robot, formulation):
-    worst, active = 0.0, 0
-    for key, st in _solver_pairs(robot):
-        daqp = controller(key, formulation, "daqp")
-        qpoases = controller(key, formulation, "qpoases")
-        r1, a1 = run(daqp, st)
-        r2, _ = run(qpoases, st)
-        assert r1.status == r2.status == STATUS_OK, (r1.status, r2.status)
-        worst = max(worst, np.abs(r1.tau - r2.tau).max() / max(1.0, np.abs(r2.tau).max()))
-        active += check_bounds(daqp.robot, st.q, st.dq, r1.tau, a1, DT).any_active(BOUND_TOL)
-    assert active >= len(BOUND_DESIGNS + TORQUE_DESIGNS), active
-    assert worst < SOLVER_TOL, worst
 
 
 # -- robustness ------------------------------------------------------------------------------------

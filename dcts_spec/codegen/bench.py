@@ -2,7 +2,7 @@
 
 The C controller is timed by a C harness (no Python in the loop), compiled with -O2
 -march=native, over states along closed-loop motions (the order a control loop sees, so the
-QP warm start is realistic) and over independent random states. Pinocchio's numeric dynamics
+history the workspace keeps is realistic) and over independent random states. Pinocchio's numeric dynamics
 terms (computeAllTerms + the task frames' Jacobians) on the same states are the reference a
 hand-written controller would start from.
 """
@@ -62,9 +62,9 @@ def build_c_harness(bundle: Path, manifest: dict, work: Path, optimization: list
     exe = work / f"{name}_bench{suffix}"
     flags = ["-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", *optimization]
     daqp = []
-    if manifest["nx"]:
-        flags.append(f"-I{manifest['daqp']['include']}")
-        daqp = [manifest["daqp"]["library"]]
+    if manifest["nx"]:  # the bundle's own DAQP objects, built with the flags it ships
+        flags.append(f"-I{bundle / 'daqp' / 'include'}")
+        daqp = [str(o) for o in sorted((bundle / "build" / "daqp").glob("*.o"))]
     run([_cc(), *flags, f"-I{bundle}", "-o", str(exe), str(source), str(bundle / f"{name}.c"),
          str(bundle / f"{name}_casadi.c"), *daqp, "-lm"], work, "bench harness build")
     return exe
@@ -73,20 +73,20 @@ def build_c_harness(bundle: Path, manifest: dict, work: Path, optimization: list
 REPEATS = 3  # each configuration runs this often; the run with the lowest median step counts
 
 
-def run_c_harness(exe: Path, states: list[State], work: Path, tag: str, warm: bool = True) -> dict:
+def run_c_harness(exe: Path, states: list[State], work: Path, tag: str) -> dict:
     states_file, out = work / f"states_{tag}.bin", work / f"times_{tag}.bin"
     _write_states(states_file, states)
     count = len(states)
     best, raw = None, b""
     for _ in range(REPEATS):  # a shared machine: keep the least disturbed run
-        run([str(exe), str(states_file), str(out), str(int(warm))], work, "bench harness", timeout=1800)
+        run([str(exe), str(states_file), str(out)], work, "bench harness", timeout=1800)
         this = out.read_bytes()
         median = float(np.median(np.frombuffer(this[: 8 * count], dtype=np.int64)))
         if best is None or median < best:
             best, raw = median, this
     i64 = np.frombuffer(raw[: 24 * count], dtype=np.int64).reshape(3, count)
     i32 = np.frombuffer(raw[24 * count:], dtype=np.int32).reshape(3, count)
-    step, data, gravity = i64
+    step, data, fallback = i64
     status, solves, iterations = i32
     solve = np.maximum(step - data, 0)
     return {
@@ -95,7 +95,7 @@ def run_c_harness(exe: Path, states: list[State], work: Path, tag: str, warm: bo
         "step": _stats(step),
         "qp_data": _stats(data),
         "solve_and_rest": _stats(solve),
-        "gravity": _stats(gravity),
+        "fallback": _stats(fallback),
         "statuses": {STATUS_NAMES.get(int(s), str(int(s))): int((status == s).sum()) for s in np.unique(status)},
         "qp_solves_max": int(solves.max()),
         "qp_iterations": {"mean": float(iterations.mean()), "max": int(iterations.max()),
@@ -194,7 +194,7 @@ def _cmeel_prefix() -> Path | None:
 
 def python_runtime(controller, states: list[State]) -> dict:
     ns = []
-    controller._last_gravity = np.zeros(controller.n)
+    controller._last_q = None
     for s in states:
         t0 = time.perf_counter_ns()
         controller.step(s.q, s.dq, s.tau_ext, s.ref if controller.ref_size else None)
@@ -235,10 +235,8 @@ def bench(spec_file: str | Path, formulation: str | None = None, states: int = 1
         generation_s = time.perf_counter() - t0
 
         exe = build_c_harness(bundle, manifest, work)
-        c_traj = run_c_harness(exe, along, work, "trajectory", warm=True)
-        c_traj_cold = run_c_harness(exe, along, work, "trajectory_cold", warm=False)
-        c_rand = run_c_harness(exe, independent, work, "random", warm=True)
-        c_rand_cold = run_c_harness(exe, independent, work, "random_cold", warm=False)
+        c_traj = run_c_harness(exe, along, work, "trajectory")
+        c_rand = run_c_harness(exe, independent, work, "random")
         py = python_runtime(controller, along[: min(python_states, len(along))])
         pin_ref = pinocchio_reference(controller, along, work)
         # valgrind does not decode every -march=native instruction (AVX-512): count on baseline x86-64
@@ -255,13 +253,10 @@ def bench(spec_file: str | Path, formulation: str | None = None, states: int = 1
         "sizes": {"nq": manifest["nq"], "nref": manifest["nref"], "nx": manifest["nx"], "na": manifest["na"],
                   "nlevels": manifest["nlevels"]},
         "compiler": f"{_cc()} {' '.join(NATIVE)}",
-        "c_step": {
-            "trajectory_warm": c_traj, "trajectory_cold": c_traj_cold,
-            "random_warm": c_rand, "random_cold": c_rand_cold,
-        },
+        "c_step": {"trajectory": c_traj, "random": c_rand},
         "python_step": py,
         "pinocchio_terms": pin_ref,
-        "ratio_c_step_to_pinocchio": c_traj_cold["step"]["median_us"] / pin_ref["median_us"],
+        "ratio_c_step_to_pinocchio": c_traj["step"]["median_us"] / pin_ref["median_us"],
         "workspace_bytes": manifest["workspace_bytes_host"],
         "daqp_init_heap_bytes": host.get("init_heap_bytes"),
         "text_bytes": sizes,
@@ -277,7 +272,7 @@ def format_report(r: dict) -> str:
     lines = [
         f"{r['name']} ({r['formulation']}): NQ={s['nq']} NREF={s['nref']} NX={s['nx']} NA={s['na']} "
         f"NLEVELS={s['nlevels']}; C compiled with {r['compiler']}; best of "
-        f"{r['c_step']['trajectory_cold'].get('runs', 1)} runs per row",
+        f"{r['c_step']['trajectory'].get('runs', 1)} runs per row",
         "",
         f"{'per step (µs)':<56}{'median':>9}{'p99':>9}{'max':>9}",
     ]
@@ -285,16 +280,13 @@ def format_report(r: dict) -> str:
     def row(label: str, st: dict) -> None:
         lines.append(f"{label:<56}{st['median_us']:>9.2f}{st['p99_us']:>9.2f}{st['max_us']:>9.2f}")
 
-    for key, label in (("trajectory_cold", "closed-loop states (default: cold start)"),
-                       ("trajectory_warm", "closed-loop states, warm start"),
-                       ("random_cold", "independent random states"),
-                       ("random_warm", "independent random states, warm start")):
+    for key, label in (("trajectory", "closed-loop states"), ("random", "independent random states")):
         c = r["c_step"][key]
         row(f"C step, {label} ({c['states']})", c["step"])
-    c = r["c_step"]["trajectory_cold"]
+    c = r["c_step"]["trajectory"]
     row("  of which qp_data (CasADi-generated)", c["qp_data"])
-    row("  of which QP solve and the rest", c["solve_and_rest"])
-    row("  gravity (fallback only)", c["gravity"])
+    row("  of which the lexicographic solve and the rest", c["solve_and_rest"])
+    row("  fallback torque (only when needed)", c["fallback"])
     row(f"Python runtime step ({r['python_step']['states']} states)", r["python_step"])
     row("Pinocchio computeAllTerms + frame Jacobians", r["pinocchio_terms"])
     data_share = c["qp_data"]["median_us"] / c["step"]["median_us"]

@@ -97,6 +97,7 @@ def workspace_fields(nq: int, nref: int, nx: int, na: int, nlevels: int, casadi_
         ("center", "double", nx2, "proximal steps"),
         ("direction", "double", nx2, ""),
         ("trial", "double", nx2, ""),
+        ("previous", "double", nx2, ""),
         ("Hq", "double", nxa * nxa, "DAQP's arrays of the QP"),
         ("fq", "double", nxa, ""),
         ("lo", "double", nc, ""),

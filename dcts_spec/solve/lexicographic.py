@@ -123,9 +123,9 @@ class Cascade:
         """min φ(x) = ½Σwⱼxⱼ² + linearᵀx over the feasible set, by the proximal-point method:
         x = argmin φ(x)/ρ + ½‖x − c‖² (scaled variables), a fixed point of which minimizes φ.
 
-        While the active set stays the same the iterates move along one direction d = x − c, so
-        the next centre is extrapolated along it, up to the first constraint it meets or the
-        minimum of φ on the ray: an active-set step, which ends the iteration in a few solves.
+        While the active set stays the same, consecutive iterates move along the same face, so the
+        next centre is extrapolated along d = x − x_previous, up to the first constraint it meets or
+        the minimum of φ on the ray: an active-set step, which ends the iteration in a few solves.
         A quadratic φ makes the Hessian I + diag(w)/ρ ill-conditioned for a small ρ, and DAQP then
         fails on the thin feasible sets the levels above leave; so ρ starts at 1 and shrinks
         tenfold per step down to `step`, and a failed solve returns the last iterate (feasible,
@@ -136,11 +136,13 @@ class Cascade:
             solved = self._solve(np.diag(1.0 + weights / rho), linear / rho - center, lbx, ubx)
             if solved is None:
                 return x
-            x = solved
-            d = x - center
-            if np.linalg.norm(d) <= PROXIMAL_TOLERANCE * (1.0 + np.linalg.norm(x)):
+            previous, x = x, solved
+            if np.linalg.norm(x - center) <= PROXIMAL_TOLERANCE * (1.0 + np.linalg.norm(x)):
                 return x
-            center = x + self._extrapolation(x, d, weights, linear, lbx, ubx) * d
+            center = x
+            if previous is not None:  # two iterates on the same face: move along it
+                d = x - previous
+                center = x + self._extrapolation(x, d, weights, linear, lbx, ubx) * d
             rho = max(0.1 * rho, step)
         return x
 
