@@ -182,6 +182,10 @@ def _check_controller(spec: Spec, robot: Robot) -> list[Diagnostic]:
     if ctl.priority_weights is not None and len(ctl.priority_weights) != n_levels:
         diags.append(src.diagnostic(("controller", "priority_weights"),
                                     f"{len(ctl.priority_weights)} weights for {n_levels} priority levels"))
+    elif ctl.priority_weights is not None and ctl.formulation == "dcts":
+        diags.append(src.diagnostic(("controller", "priority_weights"),
+                                    "no effect on dcts, which solves its priority levels lexicographically; the "
+                                    "weights apply to qp_mt and qp_md only", "warning"))
     for name in ("joint_damping", "fallback_damping"):
         size = size_of(getattr(ctl, name))
         if size is not None and size != robot.nv:

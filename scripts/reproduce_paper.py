@@ -67,7 +67,6 @@ DPI = 100
 
 # -- what is run ---------------------------------------------------------------------------------
 
-DELETE = object()  # an override value that removes the key
 
 
 @dataclass(frozen=True)
@@ -130,12 +129,6 @@ SENSITIVITY: dict[str, dict[str, Any]] = {
         # the first turn at vertex 1 already saturates torques at 0.85 m/s
         "short": {"duration": 2.5, "points": 3},
     },
-    "exp3_default_weight": {
-        "title": "Experiment 3, DCTS with dcts' default scaling weight (1e6) instead of 1e8",
-        "runs": [Run("dcts_default_w", "exp3_octagon.yaml", "dcts", ((("controller", "priority_weights"), DELETE),)),
-                 Run("dcts_default_w_vsat_0.85", "exp3_octagon.yaml", "dcts",
-                     ((("controller", "priority_weights"), DELETE),) + _vsat(0.85))],
-    },
     "exp4_semi_implicit": {
         "title": "Experiment 4 with MuJoCo's default semi-implicit integrator (one step per control period)",
         "runs": [Run("measured", "exp4_hand_guiding.yaml", "dcts", ((("scenario", "integrator"), "implicitfast"),)),
@@ -173,10 +166,7 @@ def _apply(data: dict, overrides: Iterable[tuple[tuple[Any, ...], Any]]) -> dict
         node = data
         for key in path[:-1]:
             node = node.setdefault(key, {}) if isinstance(node, dict) else node[key]
-        if value is DELETE:
-            node.pop(path[-1], None)
-        else:
-            node[path[-1]] = copy.deepcopy(value)
+        node[path[-1]] = copy.deepcopy(value)
     return data
 
 

@@ -8,16 +8,21 @@ the shaped joint/Cartesian acceleration bounds *are*.
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 
 import numpy as np
 import pinocchio as pin
+import pytest
 
 from dcts_spec.limits.joint import DEFAULT_BRAKING
 from dcts_spec.limits.viability import acceleration_bounds
 from dcts_spec.spec import Spec, load_spec_text
 from dcts_spec.spec.units import to_si
 from reference import NumericTask, closed_form_hierarchy
+
+# Campaigns of 1,000 states per robot take minutes each: run them with DCTS_CAMPAIGN=1.
+CAMPAIGN = pytest.mark.skipif(not os.environ.get("DCTS_CAMPAIGN"), reason="1,000-state campaign: set DCTS_CAMPAIGN=1 to run it")
 
 # Tool frame used for the Cartesian tasks of each built-in robot.
 TOOL = {"iiwa14": "tool", "panda": "panda_hand_tcp"}

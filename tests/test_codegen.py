@@ -15,6 +15,7 @@ import shutil
 import subprocess
 import sys
 import time
+from importlib.metadata import version as daqp_version
 from pathlib import Path
 
 import numpy as np
@@ -25,7 +26,7 @@ from typer.testing import CliRunner
 from dcts_spec.cli import app
 from dcts_spec.codegen import BundleCache, CodegenError, compile_bundle, compile_c, load_bundle, model_digest
 from dcts_spec.codegen.cache import KEY_FILE, default_cache_dir
-from dcts_spec.codegen.states import StateSampler, most_diagonal_state
+from dcts_spec.codegen.states import StateSampler
 from dcts_spec.controller import (
     STATUS_INVALID_OUTPUT,
     Controller,
@@ -34,6 +35,7 @@ from dcts_spec.controller import (
     build_controller,
 )
 from dcts_spec.sim.mismatch import scaled_robot
+from dcts_spec.solve import DAQP_SETTINGS
 from dcts_spec.spec import SpecError, load_spec
 from dcts_spec.validate import validate_spec
 

@@ -504,7 +504,6 @@ def generate_sources(
         "firmware/mps2_an500.ld": render(template("firmware_mps2_an500.ld.in"), values),
         "firmware/fw_main.c": render(template("firmware_main.c.in"), values),
         "README.md": render(template("README.md.in"), values),
-        "valgrind.supp": render(template("valgrind.supp.in"), values),
         f"{name}.map": f"/* symbols lib{name}.so exports (GNU ld version script) */\n{{\n  global: {name}_*;\n  local: *;\n}};\n",
     }
     states = golden_states(controller, golden_count)

@@ -53,9 +53,8 @@ import casadi
 
 from ..robot.model import Robot
 from ..spec import Spec, load_spec
-from .build import compile_bundle
-from .bundle import DAQP_VERSION
-from .bundle import GENERATOR, CodegenError, spec_digest, version
+from .build import compile_bundle, compiler_identity
+from .bundle import DAQP_VERSION, GENERATOR, CodegenError, spec_digest, version
 from .loader import CompiledController, load_bundle
 from .model import model_digest
 
@@ -110,20 +109,6 @@ def source_digest() -> str:
     return h.hexdigest()
 
 
-@lru_cache(maxsize=8)
-def _compiler_identity(cc: str) -> dict:
-    words = shlex.split(cc) or ["cc"]
-    path = shutil.which(words[0])
-    identity = {"command": cc, "path": os.path.realpath(path) if path else None, "version": None}
-    if path:
-        try:
-            done = subprocess.run([path, *words[1:], "--version"], capture_output=True, text=True, timeout=30)
-            identity["version"] = (done.stdout or done.stderr).strip().splitlines()[0] if done.returncode == 0 else None
-        except (OSError, subprocess.SubprocessError, IndexError):
-            pass
-    return identity
-
-
 def _daqp_identity() -> dict:
     """The DAQP whose sources every bundle compiles (downloaded once, by version)."""
     return {"version": DAQP_VERSION}
@@ -149,7 +134,7 @@ def toolchain() -> dict:
         "pinocchio": _module_version("pinocchio"),
         "python": platform.python_version(),
         "machine": platform.machine(),
-        "compiler": _compiler_identity(os.environ.get("CC") or "cc"),
+        "compiler": compiler_identity(os.environ.get("CC") or "cc"),
         "make_environment": {k: os.environ[k] for k in MAKE_ENVIRONMENT if k in os.environ},
         "makeflags": makeflags,
     }

@@ -168,29 +168,7 @@ def golden_states(controller: Controller, count: int = 120, seed: int = 0) -> li
     for i, position in enumerate((0, 25, 60, 95)):
         base = states[min(position, len(states) - 1)]
         states.insert(position, sampler.nonfinite(base, i))
-    # Then, first of all QPs, the one whose Hessian is the most nearly diagonal, twice in a row:
-    # the solver's state is carried over from its set-up and from the step before (DAQP 0.5
-    # lost its factor's storage on two diagonal Hessians in a row, and crashed on the next QP).
-    repeated = most_diagonal_state(controller, states)
-    if repeated is not None:
-        states[1:1] = [repeated, State(*(v.copy() for v in repeated.as_tuple()), repeated.kind)]
     return states
-
-
-def most_diagonal_state(controller: Controller, states: list[State]) -> State | None:
-    """The finite state whose QP Hessian has the smallest off-diagonal part (relative to its
-    diagonal); None for closed forms."""
-    if not controller.nx:
-        return None
-    best, smallest = None, np.inf
-    for s in states:
-        if not all(np.all(np.isfinite(v)) for v in s.as_tuple()):
-            continue
-        H = controller.evaluate_data(s.q, s.dq, s.tau_ext, s.ref)["H"]
-        off = np.max(np.abs(H - np.diag(np.diag(H)))) / max(1.0, float(np.max(np.abs(np.diag(H)))))
-        if off < smallest:
-            best, smallest = s, off
-    return best
 
 
 def trajectory_states(controller: Controller, count: int, seed: int = 0, episode: int = 1000,

@@ -7,11 +7,16 @@ without overshoot as long as λ_j dt ≤ 1, whatever the joint's inertia. A plai
 multiplies the velocity of a light joint by 1 − dt D / m each period, which is below −1 (growing
 oscillation) once m < dt D / 2 (the iiwa14's last joint: 9e-4 kg·m² against 5e-3 for D = 10).
 D_j / M_jj is the decay rate `controller.fallback_damping` gives a joint of inertia M_jj; β caps it.
+
+Clipping each joint's torque to its limit would break that decay (a light joint driven by the
+others' clipped coupling torques sped up); instead the damping part is scaled down by one factor
+α ∈ [0, 1], the largest that keeps every torque within its limit: a = α a_d, still a decay.
 """
 
 from __future__ import annotations
 
 import casadi as ca
+import numpy as np
 
 from .problem import ControlProblem
 
@@ -19,8 +24,17 @@ STEP_DECAY = 0.5  # β: at most half of a joint's velocity is removed per period
 
 
 def fallback_torque(problem: ControlProblem) -> ca.SX:
-    """The fallback torque (before clipping to the torque limits) as a function of q and q̇."""
+    """The fallback torque as a function of q and q̇ (within the torque limits unless ν + g alone
+    is not; the caller clips it then)."""
     M = problem.mass_matrix
     damping = ca.DM(problem.vector("fallback_damping"))
     rate = ca.fmin(damping / ca.diag(M), STEP_DECAY / problem.period)
-    return ca.mtimes(M, -rate * problem.dq) + problem.coriolis + problem.gravity
+    hold, brake = problem.coriolis + problem.gravity, ca.mtimes(M, -rate * problem.dq)
+    alpha = ca.SX(1.0)
+    for j, limit in enumerate(problem.torque_max):
+        if not np.isfinite(limit):
+            continue
+        room = ca.if_else(brake[j] > 0, limit - hold[j], -limit - hold[j])  # brake[j]·α may use this
+        share = ca.if_else(ca.fabs(brake[j]) > 0, room / (brake[j] + (brake[j] == 0)), 1.0)
+        alpha = ca.fmin(alpha, ca.fmax(share, 0.0))
+    return hold + alpha * brake

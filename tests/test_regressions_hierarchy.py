@@ -1,0 +1,364 @@
+"""Regression tests of the hierarchy at and beyond its limits.
+
+1. A posture whose target lies beyond a joint's position limit commands nothing when the joint sits
+   at that limit and every other joint is at its target (alone, and under a priority-1 position
+   task that asks for nothing).
+2. Torque continuity across the feasibility boundary of a velocity bound (joint 2 of the iiwa14
+   swept from 1.10 to 1.20 × its velocity limit), and what the relaxed solve does there.
+3. The fallback torque, held for one control period, makes joint speeds decay (MuJoCo, three robots;
+   plus a one-period pure-Python check).
+4. The relaxed solve brakes a joint beyond its velocity limit as hard as the torques allow.
+
+Every check of an acceleration is made with Pinocchio's forward dynamics (ABA) applied to the
+returned torque, not with the controller's own `ddq`.
+"""
+
+from __future__ import annotations
+
+import functools
+import time
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+import pytest
+from scipy.optimize import linprog
+
+import dcts_spec
+from dcts_spec.robot.builtin import example_robot_data_dir
+from dcts_spec.spec import load_spec_text
+from formulation_cases import CAMPAIGN, HOME, joint_acceleration_bounds, spec_text
+
+ROOT = Path(__file__).resolve().parents[1]
+BENCH = ROOT / "specs" / "bench_iiwa14.yaml"
+UR5_URDF = str(example_robot_data_dir() / "ur_description" / "urdf" / "ur5_robot.urdf")
+DT = 0.001
+
+# Table I limits of the bench spec (the iiwa14 URDF's position limits are ±170/±120/±175°: wider).
+BENCH_POSITION = "joint_position: {min: [-165, -115, -165, -115, -165, -115, -170], max: [165, 115, 165, 115, 165, 115, 170], unit: deg}"
+BENCH_VELOCITY = "[100, 110, 100, 130, 130, 180, 180]"
+BENCH_LIMITS = f"""
+  {BENCH_POSITION}
+  joint_velocity: {{max: {BENCH_VELOCITY}, unit: deg/s}}
+  joint_torque: {{max: 100}}
+"""
+BENCH_Q = np.array([-0.78, 2.0, 2.07, -1.65, -2.08, 2.0, 0.0])
+
+
+
+def _fmt(v) -> str:
+    return "[" + ", ".join(repr(float(x)) for x in np.atleast_1d(v)) + "]"
+
+
+def _accel(c, q, dq, tau) -> np.ndarray:
+    """Actual acceleration of the (Pinocchio) robot under τ, no external torque."""
+    return pin.aba(c.robot.model, c.robot.model.createData(), np.asarray(q, float), np.asarray(dq, float), np.asarray(tau, float))
+
+
+def _bench_text(torque: str = "100", velocity: str = BENCH_VELOCITY) -> str:
+    text = BENCH.read_text()
+    old_t, old_v = "joint_torque: {max: 100}", f"joint_velocity: {{max: {BENCH_VELOCITY}, unit: deg/s}}"
+    assert old_t in text and old_v in text, "specs/bench_iiwa14.yaml changed: update this test"
+    return text.replace(old_t, f"joint_torque: {{max: {torque}}}").replace(old_v, f"joint_velocity: {{max: {velocity}, unit: deg/s}}")
+
+
+@functools.lru_cache(maxsize=None)
+def _controller(text: str, formulation: str | None = None):
+    return dcts_spec.build_controller(load_spec_text(text), formulation)
+
+
+# -- 1. posture beyond a joint limit ---------------------------------------------------------------
+
+Q_LIMIT_J4 = np.deg2rad(-115.0)  # the spec's lower limit of joint 4 (URDF: −120°)
+Q_TARGET_J4 = np.deg2rad(-140.0)  # beyond both the spec's and the URDF's limit
+
+
+def _posture_case(with_position_task: bool):
+    q = HOME["iiwa14"].copy()
+    q[3] = Q_LIMIT_J4
+    target = q.copy()
+    target[3] = Q_TARGET_J4
+    posture = f"{{name: posture, type: joint, priority: {2 if with_position_task else 1}, gains: {{kp: 100, kd: 20}}, reference: {{q: {_fmt(target)}}}}}"
+    tasks = [posture]
+    if with_position_task:
+        c0 = _controller(spec_text("iiwa14", f"  - {posture}", BENCH_LIMITS))
+        data = c0.robot.model.createData()
+        pin.framesForwardKinematics(c0.robot.model, data, q)
+        here = data.oMf[c0.robot.model.getFrameId("tool")].translation
+        tasks.insert(0, f"{{name: hold, type: position, frame: tool, priority: 1, gains: {{kp: 400, kd: 40}}, reference: {{position: {_fmt(here)}}}}}")
+    c = _controller(spec_text("iiwa14", "\n".join(f"  - {t}" for t in tasks), BENCH_LIMITS, name="posture_beyond"))
+    return c, q
+
+
+def test_posture_case_is_what_it_claims():
+    c, q = _posture_case(False)
+    assert c.robot.limits.q_min[3] == pytest.approx(Q_LIMIT_J4, abs=1e-12)
+    urdf = pin.buildModelFromUrdf(str(ROOT / "dcts_spec" / "robot" / "data" / "iiwa14.urdf"))
+    # the URDF's limit is −2.0944 rad (−120°): the target is beyond it too, not only beyond the spec's
+    assert Q_TARGET_J4 < urdf.lowerPositionLimit[3] < Q_LIMIT_J4
+
+
+@pytest.mark.parametrize("with_position_task", [False, True], ids=["posture_only", "position_then_posture"])
+def test_posture_beyond_joint_limit_commands_nothing(with_position_task):
+    c, q = _posture_case(with_position_task)
+    dq = np.zeros(7)
+    r = c.step(q, dq)
+    a = _accel(c, q, dq, r.tau)
+    assert r.status == 0, (r.status, r.relaxed)
+    assert np.abs(a).max() <= 1e-6, f"actual acceleration {a} (controller's ddq {r.ddq})"
+    assert np.abs(r.ddq).max() <= 1e-6, r.ddq
+
+
+# -- 2. torque continuity past the feasibility boundary --------------------------------------------
+# Setup (found by scanning): the bench tasks at the bench q with joint 2 at 1.0 rad (mid-range, so
+# that its position bound stays inactive), joint 2's velocity limit lowered to 30 deg/s and every
+# torque limit at 30 Nm. Braking joint 2 from 1.1–1.2 × 0.5236 rad/s back to its limit in one
+# period needs 52–105 rad/s²: feasible up to ≈ 1.154 × v_max, infeasible beyond (status 1).
+# With the bench's own 110 deg/s, braking needs 192–384 rad/s², infeasible over the whole sweep
+# under any torque limit within the URDF's 100 Nm.
+
+SWEEP_Q = np.array([-0.78, 1.0, 2.07, -1.65, -2.08, 2.0, 0.0])
+SWEEP_TORQUE = "[30, 30, 30, 30, 30, 30, 30]"
+SWEEP_VELOCITY = "[100, 30, 100, 130, 130, 180, 180]"
+SWEEP_STEP = 1e-4  # rad/s
+
+
+@functools.lru_cache(maxsize=None)
+def _sweep():
+    c = _controller(_bench_text(SWEEP_TORQUE, SWEEP_VELOCITY))
+    v_max = c.robot.limits.v_max[1]
+    speeds = np.arange(1.10 * v_max, 1.20 * v_max + 0.5 * SWEEP_STEP, SWEEP_STEP)
+    rows = []
+    for v in speeds:
+        dq = np.zeros(7)
+        dq[1] = v
+        r = c.step(SWEEP_Q, dq)
+        rows.append((dq, r, _accel(c, SWEEP_Q, dq, r.tau), joint_acceleration_bounds(c.robot, SWEEP_Q, dq, DT)))
+    return c, speeds, rows
+
+
+def test_sweep_crosses_the_feasibility_boundary_continuously():
+    c, speeds, rows = _sweep()
+    status = np.array([r.status for _, r, _, _ in rows])
+    taus = np.array([r.tau for _, r, _, _ in rows])
+    assert status.min() >= 0, f"fallback at speeds {speeds[status < 0]}"
+    assert (status == 0).any() and (status == 1).any(), "the sweep must cross the feasibility boundary"
+    first = int(np.argmax(status == 1))
+    assert (status[first:] == 1).all() and (status[:first] == 0).all(), "one boundary crossing expected"
+    jumps = np.abs(np.diff(taus, axis=0))
+    limit = 0.1 * c.robot.limits.tau_max
+    worst = np.unravel_index(np.argmax(jumps / limit), jumps.shape)
+    assert (jumps <= limit).all(), (
+        f"torque jump {jumps[worst]:.3f} Nm on joint {worst[1] + 1} between q̇2 = {speeds[worst[0]]:.5f} and "
+        f"{speeds[worst[0] + 1]:.5f} rad/s (> {limit[worst[1]]:.1f})")
+    # the joint-2 bound holds where the status says so (independent check, relative 1e-6)
+    for (dq, r, a, (lo, hi)) in rows[:first]:
+        assert lo[1] - 1e-6 * max(1, abs(lo[1])) <= a[1] <= hi[1] + 1e-6 * max(1, abs(hi[1]))
+
+
+def test_sweep_relaxed_joint2_brakes():
+    """Joint 2 (the swept joint) brakes wherever its bound is relaxed."""
+    c, speeds, rows = _sweep()
+    for dq, r, a, (lo, hi) in rows:
+        if r.status == 1:
+            assert "joint:joint2" in r.relaxed, (dq[1], r.relaxed)
+            assert a[1] * dq[1] < 0, f"joint 2 at q̇ = {dq[1]:.5f}: a = {a[1]:.3f}"
+
+
+def test_sweep_every_relaxed_bound_brakes():
+    """Every joint whose bound is relaxed has an acceleration that reduces |q̇| (hence q̇ ≠ 0)."""
+    c, speeds, rows = _sweep()
+    bad = []
+    for dq, r, a, _ in rows:
+        for name in r.relaxed:
+            j = c.robot.joint_names.index(name.split(":", 1)[1])
+            if not a[j] * dq[j] < 0:
+                bad.append((round(dq[1] / c.robot.limits.v_max[1], 5), name, dq[j], a[j]))
+    assert not bad, f"{len(bad)} relaxed bounds do not brake, e.g. {bad[:3]}"
+
+
+# -- 3. the fallback torque is stable at the control period ----------------------------------------
+
+FALLBACK_ROBOTS = ("iiwa14", "panda", "ur5")
+GROWTH = 1.01  # |q̇_j(t)| ≤ 1.01 |q̇_j(0)|
+N_FAST = 8  # MuJoCo states per robot in the default run
+N_SLOW = 1000
+
+
+def _fallback_controller(robot: str):
+    text = spec_text("X", "  - {name: damping, type: joint, priority: 1, gains: {kp: 0, kd: 5}}", name=f"fallback_{robot}")
+    key, line = ("urdf", UR5_URDF) if robot == "ur5" else ("model", robot)
+    return _controller(text.replace("robot: {model: X}", f"robot: {{{key}: {line}}}"))
+
+
+def _random_states(c, count: int, seed: int):
+    rng = np.random.default_rng(seed)
+    lim = c.robot.limits
+    return [(rng.uniform(lim.q_min, lim.q_max), rng.uniform(-lim.v_max, lim.v_max)) for _ in range(count)]
+
+
+def _simulate_fallback(robot: str, count: int, seed: int = 0, duration: float = 1.0, substeps: int = 1):
+    """Worst |q̇_j(t)| / (1.01 |q̇_j(0)|) over states and joints, and the offending cases."""
+    import mujoco
+
+    from dcts_spec.sim.mujoco_model import build_mujoco_model
+
+    c = _fallback_controller(robot)
+    period = c.problem.period
+    mj_model = build_mujoco_model(c.robot.model, timestep=period / substeps)
+    data = mujoco.MjData(mj_model)
+    bad = []
+    for s, (q0, v0) in enumerate(_random_states(c, count, seed)):
+        mujoco.mj_resetData(mj_model, data)
+        data.qpos[:], data.qvel[:] = q0, v0
+        peak = np.abs(v0).copy()
+        for _ in range(round(duration / period)):
+            data.ctrl[:] = c.fallback_torque(data.qpos.copy(), data.qvel.copy())
+            for _ in range(substeps):
+                mujoco.mj_step(mj_model, data)
+            peak = np.maximum(peak, np.abs(data.qvel))
+        excess = peak - GROWTH * np.abs(v0)
+        if excess.max() > 0:
+            j = int(excess.argmax())
+            bad.append((s, j + 1, float(abs(v0[j])), float(peak[j])))
+    return bad
+
+
+
+@pytest.mark.parametrize("robot", FALLBACK_ROBOTS)
+def test_fallback_torque_decays_speeds_mujoco(robot):
+    bad = _simulate_fallback(robot, N_FAST)
+    assert not bad, f"{robot}: {len(bad)}/{N_FAST} states grow; (state, joint, |q̇0|, peak) {bad[:4]}"
+
+
+@CAMPAIGN
+@pytest.mark.parametrize("robot", FALLBACK_ROBOTS)
+def test_fallback_torque_decays_speeds_mujoco_1000(robot):
+    start = time.perf_counter()
+    bad = _simulate_fallback(robot, N_SLOW, seed=1)
+    elapsed = time.perf_counter() - start
+    assert not bad, f"{robot}: {len(bad)}/{N_SLOW} states grow ({elapsed:.0f} s); e.g. {bad[:4]}"
+
+
+def _one_period(c, q, dq):
+    """q̇ after one period under the held fallback torque (semi-implicit Euler of the exact dynamics),
+    and whether the torque was clipped."""
+    raw = np.array(c.fallback_function(q, dq)).ravel()
+    tau = c.fallback_torque(q, dq)
+    a = _accel(c, q, dq, tau)
+    return dq + c.problem.period * a, bool(np.any(np.abs(raw) > c.robot.limits.tau_max))
+
+
+@pytest.mark.parametrize("robot", FALLBACK_ROBOTS)
+def test_fallback_one_period_unclipped_decays(robot):
+    """Where the fallback torque is within the limits, every joint's speed decays in one period,
+    by the factor (1 − λ_j dt) ∈ [0.5, 1)."""
+    c = _fallback_controller(robot)
+    checked = 0
+    for q, dq in _random_states(c, 1000, seed=2):
+        dq_next, clipped = _one_period(c, q, dq)
+        if clipped:
+            continue
+        checked += 1
+        ratio = dq_next / dq
+        assert np.all(ratio >= 0.5 - 1e-9) and np.all(ratio < 1.0), (q, dq, ratio)
+    assert checked >= 100, f"only {checked} of 1000 states unclipped"
+
+
+@pytest.mark.parametrize("robot", FALLBACK_ROBOTS)
+def test_fallback_one_period_decays_all_states(robot):
+    c = _fallback_controller(robot)
+    bad = []
+    for q, dq in _random_states(c, 1000, seed=2):
+        dq_next, clipped = _one_period(c, q, dq)
+        growth = np.abs(dq_next) - GROWTH * np.abs(dq)
+        if growth.max() > 0:
+            j = int(growth.argmax())
+            bad.append((j + 1, float(abs(dq[j])), float(abs(dq_next[j])), clipped))
+    assert not bad, f"{robot}: {len(bad)}/1000 states grow in one period; (joint, |q̇|, |q̇ next|, clipped) {bad[:4]}"
+
+
+# -- 4. the relaxed solve brakes -------------------------------------------------------------------
+
+
+def _max_braking(c, q, dq, j: int, sign: float) -> float:
+    """The most braking acceleration of joint j (sign · a_j minimal) that the torque limits allow while
+    every other joint's acceleration bound holds: an LP in τ."""
+    model = c.robot.model
+    data = model.createData()
+    M = pin.crba(model, data, q)
+    M = np.triu(M) + np.triu(M, 1).T
+    Minv = np.linalg.inv(M)
+    h = pin.rnea(model, data, q, dq, np.zeros(model.nv))
+    a0 = -Minv @ h  # a = a0 + Minv τ
+    lo, hi = joint_acceleration_bounds(c.robot, q, dq, DT)
+    others = [i for i in range(model.nv) if i != j]
+    A_ub = np.vstack([Minv[others], -Minv[others]])
+    b_ub = np.concatenate([hi[others] - a0[others], -(lo[others] - a0[others])])
+    tau_max = c.robot.limits.tau_max
+    res = linprog(sign * Minv[j], A_ub=A_ub, b_ub=b_ub, bounds=list(zip(-tau_max, tau_max)), method="highs")
+    assert res.status == 0, res.message
+    return float(a0[j] + Minv[j] @ res.x)
+
+
+@pytest.mark.parametrize("direction", [1.0, -1.0], ids=["positive", "negative"])
+def test_bench_joint7_at_1p5_vmax(direction):
+    """The bench's torque limits (100 Nm) brake joint 7 (M77 ≈ 1e-3 kg·m²) from 1.5 v_max back to
+    v_max in one period with ≈ 1.6 Nm: the bound is feasible, status 0, and a7 = the bound."""
+    c = _controller(_bench_text())
+    v7 = c.robot.limits.v_max[6]
+    dq = np.zeros(7)
+    dq[6] = direction * 1.5 * v7
+    r = c.step(BENCH_Q, dq)
+    a = _accel(c, BENCH_Q, dq, r.tau)
+    lo, hi = joint_acceleration_bounds(c.robot, BENCH_Q, dq, DT)
+    assert r.status in (0, 1)
+    assert a[6] * dq[6] < 0
+    if r.status == 1:
+        assert "joint:joint7" in r.relaxed
+        assert a[6] * direction <= _max_braking(c, BENCH_Q, dq, 6, direction) * direction + 1e-6 * abs(a[6]) + 1e-9
+    else:
+        bound = hi[6] if direction > 0 else lo[6]
+        assert a[6] == pytest.approx(bound, rel=1e-6)  # exactly back to v_max in one period
+        assert abs(dq[6] + DT * a[6]) <= v7 * (1 + 1e-6)
+
+
+# With only joint 7 limited (0.5 Nm) the other joints brake it through the coupling (joint 5 at its
+# velocity bound, −2269 rad/s²) and the bound still holds: status 0. Limiting joints 5 and 6 to
+# 10 Nm too makes it infeasible.
+TIGHT = "[100, 100, 100, 100, 10, 10, 0.5]"
+TIGHT_J7 = 0.5
+
+
+def _tight_case(direction):
+    c = _controller(_bench_text(TIGHT))
+    dq = np.zeros(7)
+    dq[6] = direction * 1.5 * c.robot.limits.v_max[6]
+    r = c.step(BENCH_Q, dq)
+    return c, dq, r, _accel(c, BENCH_Q, dq, r.tau)
+
+
+@pytest.mark.parametrize("direction", [1.0, -1.0], ids=["positive", "negative"])
+def test_relaxed_solve_brakes_joint7(direction):
+    c, dq, r, a = _tight_case(direction)
+    assert r.status == 1, (r.status, r.relaxed)
+    assert "joint:joint7" in r.relaxed, r.relaxed
+    assert a[6] * dq[6] < 0, f"a7 = {a[6]} at q̇7 = {dq[6]}"
+    best = _max_braking(c, BENCH_Q, dq, 6, direction)
+    # at least as much braking as the torque limits allow with every other joint's bound holding
+    assert direction * a[6] <= direction * best + 1e-6 * abs(best), f"a7 = {a[6]}, most braking allowed {best}"
+    assert r.tau[6] == pytest.approx(-direction * TIGHT_J7, abs=1e-6), r.tau
+
+
+
+@pytest.mark.parametrize("direction", [
+    pytest.param(1.0, id="positive"),
+    pytest.param(-1.0, id="negative"),  # passes: only joint 7 is relaxed
+])
+def test_relaxation_stays_on_the_infeasible_joint(direction):
+    c, dq, r, a = _tight_case(direction)
+    assert r.relaxed == ["joint:joint7"], r.relaxed
+    lo, hi = joint_acceleration_bounds(c.robot, BENCH_Q, dq, DT)
+    others = np.arange(6)
+    tol = 1e-6 * np.maximum(1.0, np.abs(hi[others]))
+    assert np.all(a[others] <= hi[others] + tol) and np.all(a[others] >= lo[others] - tol), (a, lo, hi)
