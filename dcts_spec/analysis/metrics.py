@@ -5,7 +5,8 @@ Definitions (N samples t_k = k T; violations are 0 when a limit holds or does no
 - max_joint_velocity_violation = max_{k,j} max(0, |q̇_j| − q̇_max,j), rad/s; `_ratio`: over q̇_max,j
 - max_torque_violation = max_{k,j} max(0, |τ_j| − τ_max,j), Nm (τ as applied)
 - max_cartesian_violation = max over bounds and samples of the distance outside [c_min, c_max], m
-- solver_failures = #{k: status_k < 0}; limits_relaxed = #{k: status_k = 1}
+- solver_failures = #{k: status_k < 0}; limits_relaxed = #{k: status_k = 1}; relaxed_bounds: for
+  each joint/Cartesian bound that gave way, its number of steps and the first and last time
 - min_scaling = min over samples and levels of the task scalings
 - task_rms_error[t] = sqrt(mean_k ‖Δx_t,k‖²), task_mean_error[t] = mean_k ‖Δx_t,k‖ (SI units)
 - mean_acceleration_error[p] = mean_k ‖J_p a_k + J̇_p q̇_k − ẍ_d,p,k‖ with the actual acceleration
@@ -66,6 +67,7 @@ def summarize(log: SimulationLog, series: TimeSeries, robot: Robot, priorities: 
         "max_cartesian_violation": _cartesian_violation(series, robot),
         "solver_failures": int(np.count_nonzero(log.status < 0)),
         "limits_relaxed": int(np.count_nonzero(log.status == STATUS_LIMITS_RELAXED)),
+        "relaxed_bounds": _relaxed_bounds(log),
         "min_scaling": _peak(log.scaling, np.min, default=1.0),
         "task_rms_error": {t: _rms_norm(e) for t, e in series.task_errors.items()},
         "task_mean_error": {t: _mean_norm(e) for t, e in series.task_errors.items()},
@@ -82,6 +84,16 @@ def summarize(log: SimulationLog, series: TimeSeries, robot: Robot, priorities: 
         "realtime_factor": log.duration / log.wall_time if log.wall_time > 0 else None,
     }
     return summary
+
+
+def _relaxed_bounds(log: SimulationLog) -> dict[str, dict[str, float | int]]:
+    """Each bound that gave way: how many steps, and the first and last time (s)."""
+    out = {}
+    for j, name in enumerate(log.bound_names):
+        steps = np.flatnonzero(log.relaxed[:, j])
+        if steps.size:
+            out[name] = {"steps": int(steps.size), "first": float(log.time[steps[0]]), "last": float(log.time[steps[-1]])}
+    return out
 
 
 def _excess(values: np.ndarray, bound: np.ndarray) -> np.ndarray:

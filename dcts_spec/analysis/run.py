@@ -39,6 +39,7 @@ class RunResult:
             **self.series.arrays(),
             period=self.log.period,
             joint_names=np.array(self.robot.joint_names),
+            bound_names=np.array(self.log.bound_names, dtype=str),
             task_names=np.array(list(self.row_names)),
             priorities=np.array(self.priorities),
             frames=np.array(list(self.series.frame_positions)),

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..controller import STATUS_INVALID_OUTPUT, StepResult
+from ..controller import STATUS_INVALID_OUTPUT, STATUS_LIMITS_RELAXED, StepResult
 from ..tasks import ReferenceInput
 from .bundle import CodegenError
 from .layout import info_struct, workspace_fields, workspace_struct
@@ -167,9 +167,8 @@ class CompiledController:
 
         The arrays of the result are new (later steps do not change them)."""
         status = self._call(q, dq, tau_ext, ref)
-        relaxed = [name for name, flag in zip(self.bound_names, self._info.relaxed) if flag] if status == 1 else []
         return StepResult(self._tau.copy(), self._ddq_out.copy(), self._scaling_out.copy(), int(status),
-                          self._solution(status), relaxed)
+                          self._solution(status), self.last_relaxed())
 
     def step_into(self, q, dq, tau_ext, ref, tau: np.ndarray, ddq: np.ndarray | None = None,
                   scaling: np.ndarray | None = None) -> int:
@@ -183,6 +182,12 @@ class CompiledController:
         if scaling is not None:
             scaling[...] = self._scaling_out
         return status
+
+    def last_relaxed(self) -> list[str]:
+        """The bounds that gave way in the last step (status 1), as `StepResult.relaxed`."""
+        if self._info.status != STATUS_LIMITS_RELAXED:
+            return []
+        return [name for name, flag in zip(self.bound_names, self._info.relaxed) if flag]
 
     def last_x(self) -> np.ndarray:
         """The QP solution of the last step, as `StepResult.x` (a copy)."""

@@ -168,6 +168,8 @@ def describe(run: RunResult) -> str:
                  f"Cartesian {s['max_cartesian_violation']:.3g} m")
     lines.append(f"  solver     {s['solver_failures']} failures, {s['limits_relaxed']} steps with relaxed limits, "
                  f"min scaling {s['min_scaling']:.3g}")
+    for name, r in s.get("relaxed_bounds", {}).items():
+        lines.append(f"  relaxed    {name}: {r['steps']} steps between t = {r['first']:.4g} s and {r['last']:.4g} s")
     errors = ", ".join(f"{k} {v:.3g}" for k, v in s["task_rms_error"].items())
     lines.append(f"  tasks      RMS error: {errors}; priority-1 mean acceleration error "
                  f"{s['primary_mean_acceleration_error']:.3g}")

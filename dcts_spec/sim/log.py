@@ -28,12 +28,15 @@ class SimulationLog:
     ref: np.ndarray
     scaling: np.ndarray
     status: np.ndarray
+    relaxed: np.ndarray  # (steps, bounds): the joint/Cartesian bounds that gave way (status 1)
+    bound_names: list[str] = field(default_factory=list)  # the columns of `relaxed`
     waypoint_times: np.ndarray = field(default_factory=lambda: np.zeros(0))  # NaN where not reached
     wall_time: float = 0.0  # s spent in the simulation loop (controller, physics, logging; not hooks)
     diverged_at: float | None = None  # when MuJoCo rejected the state or the torque: the run stopped
 
     @classmethod
-    def allocate(cls, steps: int, n: int, ref_size: int, levels: int, period: float) -> SimulationLog:
+    def allocate(cls, steps: int, n: int, ref_size: int, levels: int, period: float,
+                 bound_names: list[str] = ()) -> SimulationLog:
         def zeros(*shape: int) -> np.ndarray:
             return np.zeros((steps, *shape))
 
@@ -43,6 +46,7 @@ class SimulationLog:
             q=zeros(n), dq=zeros(n), ddq=zeros(n), ddq_commanded=zeros(n), tau=zeros(n),
             tau_ext_true=zeros(n), tau_ext_measured=zeros(n), ref=zeros(ref_size), scaling=zeros(levels),
             status=np.zeros(steps, dtype=np.int8),
+            relaxed=np.zeros((steps, len(bound_names)), dtype=bool), bound_names=list(bound_names),
         )
 
     @property

@@ -11,6 +11,7 @@ from typing import TYPE_CHECKING
 import mujoco
 import numpy as np
 
+from ..controller import STATUS_LIMITS_RELAXED
 from ..robot.model import Robot
 from ..spec import Spec
 from ..tasks import make_task
@@ -72,7 +73,8 @@ class Simulation:
         steps, substeps, period = sc.steps, sc.substeps, sc.period
         n = self.robot.nv
         levels = len(self.runtime.priorities)
-        log = SimulationLog.allocate(steps, n, self.initial_ref.size, levels, period)
+        bound_names = list(getattr(self.runtime, "bound_names", []))
+        log = SimulationLog.allocate(steps, n, self.initial_ref.size, levels, period, bound_names)
         disturbances = Disturbances(sc, self.robot.model, m)
         sensor = TorqueSensor(sc.sensing, self.controller_robot.model, steps)
         follower = self.waypoints
@@ -109,12 +111,15 @@ class Simulation:
                 if step_into is not None:
                     status[k] = step_into(q[k], dq[k], tau_meas[k], ref, tau[k], ddq_cmd[k], scaling[k])
                     ctrl[:] = tau[k]
+                    if status[k] == STATUS_LIMITS_RELAXED:
+                        _mark(log, k, self.runtime.last_relaxed())
                 else:
                     result = step(q[k], dq[k], tau_meas[k], ref)
                     ctrl[:] = tau[k] = result.tau
                     ddq_cmd[k] = result.ddq
                     scaling[k] = result.scaling
                     status[k] = result.status
+                    _mark(log, k, result.relaxed)
                 for s in range(substeps):
                     j = k * substeps + s
                     disturbances.apply(m, d, j)
@@ -162,3 +167,9 @@ def prepare_simulation(spec: Spec, runtime: str = "python", formulation: str | N
     rt = make_runtime(spec, runtime, formulation, robot=controller_robot, work_dir=work_dir, cache=cache,
                       model_changes=changes)
     return Simulation(spec, report.robot, scenario, rt, controller_robot, runtime, formulation)
+
+
+def _mark(log: SimulationLog, k: int, relaxed: list[str]) -> None:
+    """Record which bounds gave way at step k."""
+    for name in relaxed:
+        log.relaxed[k, log.bound_names.index(name)] = True
