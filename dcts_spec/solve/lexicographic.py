@@ -6,7 +6,8 @@ a level therefore means fixing its variables (lb = ub), and the cascade is:
 
   1. every level at its nominal value (s = 1, δ = 0) and ½xᵀHx + fᵀx over the rest: if this QP
      is feasible it is the lexicographic optimum (every level met). One solve: the usual case.
-  2. otherwise, for each level i, highest first, with the levels above fixed:
+  2. otherwise, for each level i, highest first, with the levels above fixed (starting at the
+     lowest level that can be scaled with every level above it met, if there is one):
        scale:  max sᵢ with δᵢ fixed (0), the levels below free;
        bend:   only if no sᵢ ∈ [0, 1] is feasible: min ‖δᵢ‖², then scale again;
      then the remaining levels nominal (as in 1): if feasible, done.
@@ -126,12 +127,19 @@ class Cascade:
         While the active set stays the same, consecutive iterates move along the same face, so the
         next centre is extrapolated along d = x − x_previous, up to the first constraint it meets or
         the minimum of φ on the ray: an active-set step, which ends the iteration in a few solves.
+        A linear φ is done as soon as an iterate minimizes it over the variable bounds alone.
         A quadratic φ makes the Hessian I + diag(w)/ρ ill-conditioned for a small ρ, and DAQP then
-        fails on the thin feasible sets the levels above leave; so ρ starts at 1 and shrinks
-        tenfold per step down to `step`, and a failed solve returns the last iterate (feasible,
-        and as close to the minimum as DAQP could go)."""
-        rho = step if not weights.any() else 1.0
+        may fail on the thin feasible sets the levels above leave: if it does at once, ρ starts
+        again at 1 and shrinks tenfold per step down to `step`, and a later failed solve returns
+        the last iterate (feasible, and as close to the minimum as DAQP could go)."""
+        x = self._proximal_steps(weights, linear, step, step, lbx, ubx)
+        if x is None and weights.any():
+            x = self._proximal_steps(weights, linear, 1.0, step, lbx, ubx)
+        return x
+
+    def _proximal_steps(self, weights, linear, rho, step, lbx, ubx) -> np.ndarray | None:
         center, x = self.nominal, None
+        linear_only = not weights.any()
         for _ in range(PROXIMAL_ITERATIONS):
             solved = self._solve(np.diag(1.0 + weights / rho), linear / rho - center, lbx, ubx)
             if solved is None:
@@ -139,12 +147,22 @@ class Cascade:
             previous, x = x, solved
             if np.linalg.norm(x - center) <= PROXIMAL_TOLERANCE * (1.0 + np.linalg.norm(x)):
                 return x
+            if linear_only and self._at_best_bounds(x, linear, lbx, ubx):
+                return x
             center = x
             if previous is not None:  # two iterates on the same face: move along it
                 d = x - previous
                 center = x + self._extrapolation(x, d, weights, linear, lbx, ubx) * d
             rho = max(0.1 * rho, step)
         return x
+
+    @staticmethod
+    def _at_best_bounds(x, linear, lbx, ubx) -> bool:
+        """Is x at the bound each variable of a linear objective is pushed toward?"""
+        up, down = linear < 0, linear > 0
+        tol = PROXIMAL_TOLERANCE
+        return bool(np.all(x[up] >= ubx[up] - tol * (1.0 + np.abs(ubx[up])))
+                    and np.all(x[down] <= lbx[down] + tol * (1.0 + np.abs(lbx[down]))))
 
     def _extrapolation(self, x, d, weights, linear, lbx, ubx) -> float:
         """The largest t ≥ 0 keeping x + t d feasible, capped at the minimum of φ along it. The
@@ -180,32 +198,50 @@ class Cascade:
         x = self.final(0, self.lbx, self.ubx)
         if x is not None or not self.structure.priorities:
             return x
-        lbx, ubx = self.lbx.copy(), self.ubx.copy()
         count = len(self.structure.priorities)
-        witness = None  # the last stage's solution: it meets every level fixed so far
-        for i, (s, bend) in enumerate(self.structure.priorities):
+        start, lbx, ubx, witness = self._first_to_scale()
+        for i in range(start, count):
+            s, bend = self.structure.priorities[i]
             bend = list(bend)
-            free_lo, free_hi = lbx.copy(), ubx.copy()
-            lbx[bend] = ubx[bend] = 0.0
-            x = self.scale(i, lbx, ubx)
-            if x is None:
-                x = self.bend(i, free_lo, free_hi)
-                if x is None:  # infeasible: only possible for the first level, else DAQP failed
-                    return witness
-                lbx[bend] = ubx[bend] = x[bend]
-                scaled = self.scale(i, lbx, ubx)
-                x = x if scaled is None else scaled  # (the bend's solution witnesses a scaling)
-            witness = x
+            if witness is None or i > start:  # (the first level to scale may be solved already)
+                free_lo, free_hi = lbx.copy(), ubx.copy()
+                lbx[bend] = ubx[bend] = 0.0
+                x = self.scale(i, lbx, ubx)
+                if x is None:
+                    x = self.bend(i, free_lo, free_hi)
+                    if x is None:  # infeasible: only possible for the first level, else DAQP failed
+                        return witness
+                    lbx[bend] = ubx[bend] = x[bend]
+                    scaled = self.scale(i, lbx, ubx)
+                    x = x if scaled is None else scaled  # (the bend's solution witnesses a scaling)
+                witness = x
             # fixed exactly: a band would let the levels below move it within the band, and in
             # ill-conditioned states they gain far more than its width (a bend 40 % smaller for a
             # band of 1e-7, measured); DAQP takes fixed variables as equalities
-            lbx[s] = ubx[s] = min(max(x[s], self.lbx[s]), self.ubx[s])
+            lbx[s] = ubx[s] = min(max(witness[s], self.lbx[s]), self.ubx[s])
             if i + 1 < count:
                 x = self.final(i + 1, lbx, ubx)
                 if x is not None:
                     return x
         x = self.final(count, lbx, ubx)
         return witness if x is None else x
+
+    def _first_to_scale(self) -> tuple[int, np.ndarray, np.ndarray, np.ndarray | None]:
+        """The lowest level i that can be scaled (δᵢ = 0) with every level above it met: then
+        those levels are lexicographically optimal as they are, and the cascade starts at i.
+        Usually the lowest level is the one that gives way, and this saves a stage per level
+        above it. Returns i, the bounds with the levels above i fixed (and δᵢ = 0) and the
+        scaling stage's solution, or (0, the bounds, None) to start from the top."""
+        for i in range(len(self.structure.priorities) - 1, 0, -1):
+            lbx, ubx = self._fixed(0, self.lbx, self.ubx, rest_nominal=True)
+            for s, bend in self.structure.priorities[i:]:
+                lbx[s], ubx[s] = self.lbx[s], self.ubx[s]
+                lbx[list(bend)], ubx[list(bend)] = self.lbx[list(bend)], self.ubx[list(bend)]
+            lbx[list(self.structure.priorities[i][1])] = ubx[list(self.structure.priorities[i][1])] = 0.0
+            x = self.scale(i, lbx, ubx)
+            if x is not None:
+                return i, lbx, ubx, x
+        return 0, self.lbx.copy(), self.ubx.copy(), None
 
     def relax(self) -> bool:
         """Widen the bound rows as little as the torque limits allow: one slack σᵣ ≥ 0 per bound,
