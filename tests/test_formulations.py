@@ -1,4 +1,4 @@
-"""Properties P1–P5 of the formulations (../shared/DESIGN.md, "Formulation") on random states.
+"""Properties P1–P5 of the formulations (docs/formulations.md) on random states.
 
 Every expectation is computed independently of dcts_spec's symbolic layer and formulations:
 task Jacobians, J̇q̇, targets and dynamics come from Pinocchio, the closed-form hierarchy from

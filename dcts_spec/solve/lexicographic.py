@@ -49,7 +49,7 @@ DAQP_EQUALITY = 5  # sense: active and immutable
 SCALE_STEP = 1e-8
 BEND_STEP = 1e-5
 MAX_EXTRAPOLATION = 1e6
-RELAX_MARGIN = 1e-5  # relative: a relaxed bound is widened this much beyond what was achieved
+RELAX_MARGIN = 1e-7  # relative: a relaxed bound is widened this much beyond what was achieved
 EXTRAPOLATION_MARGIN = 1e-9
 PROXIMAL_ITERATIONS = 30
 PROXIMAL_TOLERANCE = 1e-10
@@ -249,8 +249,8 @@ class Cascade:
         R x + σ ≥ lo and R x − σ ≤ hi, min Σσᵣ (a linear stage, as the scaling). The sum, not the
         sum of squares: a least-squares relaxation spreads the violation, and bounds that could
         hold gave way a little to spare the one that cannot (a joint at rest pushed 1.65 % beyond
-        its bound to gain 6e-5 on another). Each bound is then widened to what was achieved, plus
-        RELAX_MARGIN (the next stages must not be left a degenerate feasible set)."""
+        its bound to gain 6e-5 on another). Each bound that gave way is then widened to what was
+        achieved, plus RELAX_MARGIN (the next stages must not be left a degenerate feasible set)."""
         rows = self.structure.bound_rows
         nx, r = self.lbx.size, len(rows)
         if not r:
@@ -272,8 +272,10 @@ class Cascade:
         self.relaxed_point = x[:nx]
         value = R @ x[:nx]
         margin = RELAX_MARGIN * np.maximum(1.0, np.abs(value))
-        self.lba[rows.start : rows.stop] = np.minimum(lo, value - margin)
-        self.uba[rows.start : rows.stop] = np.maximum(hi, value + margin)
+        # only the bounds that gave way are widened (a margin on a bound that held would let
+        # the stages below cross it)
+        self.lba[rows.start : rows.stop] = np.where(value < lo - margin, value - margin, lo)
+        self.uba[rows.start : rows.stop] = np.where(value > hi + margin, value + margin, hi)
         return True
 
 
