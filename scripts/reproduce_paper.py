@@ -14,8 +14,8 @@ the same closed loop as `dcts compare`):
     exp4  hand guiding toward the limits        dcts with τ_ext measured / ignored (two spec files)
     exp5  unmodelled 4.1 kg payload             dcts, osc, qp_md
 
-and, on full runs, the sensitivity studies the doc discusses (v_sat = 0.85 m/s, dcts' default
-scaling weight, MuJoCo's default integrator, the payload's centre of mass).
+and, on full runs, the sensitivity studies the doc discusses (v_sat = 0.85 m/s, MuJoCo's default
+integrator, the payload's centre of mass).
 
 Writes:
 - DIR/<experiment>/: `dcts compare`'s output per experiment (comparison.md/json, overlay
@@ -720,9 +720,6 @@ def analyze_sensitivity(key: str, runs: dict[str, RunResult]) -> dict[str, Any]:
     """The analysis of a sensitivity study; its claims' ids are prefixed with the study."""
     if key == "exp3_vsat_0.85":
         return _prefixed(key, analyze_exp3(runs))
-    if key == "exp3_default_weight":
-        return {"metrics": {label: analyze_exp3({"dcts": r, "projector": r})["metrics"]["dcts"]
-                            for label, r in runs.items()}, "claims": []}
     if key == "exp4_semi_implicit":
         return _prefixed(key, analyze_exp4(runs))
     if key == "exp1_semi_implicit":
@@ -1078,7 +1075,6 @@ def table2(exp3: dict[str, Any], vsat085: dict[str, Any] | None) -> str:
 
 SENSITIVITY_ROWS = {
     "exp3_vsat_0.85": ROWS["exp3"],
-    "exp3_default_weight": ROWS["exp3"],
     "exp4_semi_implicit": ROWS["exp4"],
     "exp1_semi_implicit": [("null-space KE peak [J]", "null_space_kinetic_energy_peak", 1),
                            ("final orientation error [°]", "task_error_final", 180 / math.pi),
