@@ -381,6 +381,12 @@ def _model_texts(model: dict) -> tuple[str, str]:
     return header, readme
 
 
+def _golden_tolerances(formulation: str) -> dict[str, str]:
+    """How closely the C must replay the Python runtime (templates/test.c.in says why)."""
+    weighted = formulation in ("qp_mt", "qp_md")
+    return {"GOLDEN_TOLERANCE": "1e-5" if weighted else "1e-8", "GOLDEN_RELAXED_TOLERANCE": "1e-4" if weighted else "1e-8"}
+
+
 def generate_sources(
     controller: Controller,
     directory: Path,
@@ -493,6 +499,7 @@ def generate_sources(
         "TAU_MAX_ARRAY": c_array(tau_max),
         "DAMPING_ARRAY": c_array(damping),
         "NEEDS_DAQP": int(nx > 0),
+        **_golden_tolerances(controller.formulation),
     }
     files = {
         f"{name}.h": render(template("controller.h.in"), values),
