@@ -20,7 +20,7 @@ from .formulations import FORMULATIONS, ControlLaw, ControlProblem, build_proble
 from .formulations.fallback import fallback_torque
 from .formulations.qp import BOUNDS
 from .robot.model import Robot
-from .solve import Solution, Structure, check_bounds, solve_lexicographic
+from .solve import Structure, check_bounds, solve_lexicographic
 from .spec import Spec, load_spec
 from .tasks import ReferenceInput
 from .validate import ValidationReport, validate_spec
@@ -53,7 +53,7 @@ class StepResult:
     scaling: np.ndarray  # one task scaling factor per priority level, highest first, in [0, 1] (1 = not scaled)
     status: int  # STATUS_* code; negative means the fallback torque was applied
     x: np.ndarray  # the QP solution, in scaled variables (empty for closed forms)
-    relaxed: list[str] = field(default_factory=list)  # bounds that gave way (status 1), worst first
+    relaxed: list[str] = field(default_factory=list)  # bounds that gave way (status 1), in row order
 
     @property
     def ok(self) -> bool:
@@ -159,7 +159,7 @@ class Controller:
 
     # -- running ---------------------------------------------------------------------------------
 
-    def _solve(self, data: dict[str, np.ndarray], unbounded: bool = False) -> Solution | None:
+    def _solve(self, data: dict[str, np.ndarray], unbounded: bool = False) -> np.ndarray | None:
         """The lexicographic solution at the data (None if DAQP failed); `unbounded`: with the
         torque limits and the joint/Cartesian bounds left out."""
         lba, uba = data["lba"].ravel(), data["uba"].ravel()
@@ -184,7 +184,7 @@ class Controller:
         if free is None:
             return 0.0
         P, p0 = data["P"], data["p0"].ravel()
-        return least_squares_scaling(P @ x + p0, P @ free.x + p0)
+        return least_squares_scaling(P @ x + p0, P @ free + p0)
 
     def fallback_torque(self, q: np.ndarray, dq: np.ndarray) -> np.ndarray:
         """The stable damping of `formulations/fallback.py` at q (else the last finite q), clipped to
@@ -235,7 +235,7 @@ class Controller:
             solution = self._solve(data) if finite else None
             if solution is None:
                 return self._fallback(q, dq, STATUS_SOLVER_FAILED, np.zeros(0))
-            x = solution.x
+            x = solution
         tau = data["tau0"].ravel() + data["T"] @ x
         tolerance = TORQUE_TOLERANCE * np.maximum(1.0, np.where(np.isfinite(self.tau_max), self.tau_max, 1.0))
         out_of_limits = self.law.enforces_torque_limits and np.any(np.abs(tau) > self.tau_max + tolerance)

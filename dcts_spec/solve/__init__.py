@@ -4,10 +4,9 @@ from .lexicographic import (
     BOUND_TOLERANCE,
     DAQP_SETTINGS,
     BoundCheck,
-    Solution,
     Structure,
     check_bounds,
     solve_lexicographic,
 )
 
-__all__ = ["BOUND_TOLERANCE", "DAQP_SETTINGS", "BoundCheck", "Solution", "Structure", "check_bounds", "solve_lexicographic"]
+__all__ = ["BOUND_TOLERANCE", "DAQP_SETTINGS", "BoundCheck", "Structure", "check_bounds", "solve_lexicographic"]

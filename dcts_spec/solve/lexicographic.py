@@ -67,13 +67,6 @@ class Structure:
     priorities: tuple[tuple[int, tuple[int, ...]], ...]
 
 
-@dataclass
-class Solution:
-    x: np.ndarray
-    relaxed: bool  # the joint/Cartesian bounds had to be widened (status "limits relaxed")
-    solves: int
-
-
 def daqp_qp(H, f, A, lower, upper) -> tuple[np.ndarray | None, int]:
     """One ordinary QP: min ½xᵀHx + fᵀx, lower ≤ [x; Ax] ≤ upper (equal ends: an equality).
     Returns x (None if DAQP found no solution) and its exit flag."""
@@ -95,7 +88,6 @@ class Cascade:
         self.lbx, self.ubx = lbx.copy(), ubx.copy()
         self.lba, self.uba = lba.copy(), uba.copy()
         self.structure = structure
-        self.solves = 0
         self.relaxed_point: np.ndarray | None = None  # set by relax
         nominal = np.zeros(lbx.size)
         for s, _ in structure.priorities:
@@ -103,22 +95,15 @@ class Cascade:
         self.nominal = nominal
 
     def _solve(self, H, f, lbx, ubx) -> np.ndarray | None:
-        self.solves += 1
         x, _ = daqp_qp(H, f, self.A, np.concatenate([lbx, self.lba]), np.concatenate([ubx, self.uba]))
         return x
 
-    def _fixed(self, upto: int, lbx, ubx, rest_nominal: bool) -> tuple[np.ndarray, np.ndarray]:
-        """Bounds with the levels [0, upto) as they are in lbx/ubx, and the others nominal if asked."""
-        lo, hi = lbx.copy(), ubx.copy()
-        if rest_nominal:
-            for s, bend in self.structure.priorities[upto:]:
-                lo[s] = hi[s] = self.nominal[s]
-                lo[list(bend)] = hi[list(bend)] = 0.0
-        return lo, hi
-
     def final(self, upto: int, lbx, ubx) -> np.ndarray | None:
-        """½xᵀHx + fᵀx with the levels below `upto` nominal."""
-        lo, hi = self._fixed(upto, lbx, ubx, rest_nominal=True)
+        """½xᵀHx + fᵀx with the levels [0, upto) as they are in lbx/ubx and the others nominal."""
+        lo, hi = lbx.copy(), ubx.copy()
+        for s, bend in self.structure.priorities[upto:]:
+            lo[s] = hi[s] = self.nominal[s]
+            lo[list(bend)] = hi[list(bend)] = 0.0
         return self._solve(self.H, self.f, lo, hi)
 
     def _proximal(self, weights: np.ndarray, linear: np.ndarray, step: float, lbx, ubx) -> np.ndarray | None:
@@ -234,11 +219,12 @@ class Cascade:
         above it. Returns i, the bounds with the levels above i fixed (and δᵢ = 0) and the
         scaling stage's solution, or (0, the bounds, None) to start from the top."""
         for i in range(len(self.structure.priorities) - 1, 0, -1):
-            lbx, ubx = self._fixed(0, self.lbx, self.ubx, rest_nominal=True)
-            for s, bend in self.structure.priorities[i:]:
-                lbx[s], ubx[s] = self.lbx[s], self.ubx[s]
-                lbx[list(bend)], ubx[list(bend)] = self.lbx[list(bend)], self.ubx[list(bend)]
-            lbx[list(self.structure.priorities[i][1])] = ubx[list(self.structure.priorities[i][1])] = 0.0
+            lbx, ubx = self.lbx.copy(), self.ubx.copy()
+            for s, bend in self.structure.priorities[:i]:
+                lbx[s] = ubx[s] = self.nominal[s]
+                lbx[list(bend)] = ubx[list(bend)] = 0.0
+            bend = list(self.structure.priorities[i][1])
+            lbx[bend] = ubx[bend] = 0.0
             x = self.scale(i, lbx, ubx)
             if x is not None:
                 return i, lbx, ubx, x
@@ -266,7 +252,6 @@ class Cascade:
         slack.nominal = np.concatenate([self.nominal, np.zeros(r)])
         linear = np.concatenate([np.zeros(nx), np.ones(r)])
         x = slack._proximal(np.zeros(nx + r), linear, SCALE_STEP, slack.lbx, slack.ubx)
-        self.solves += slack.solves
         if x is None:
             return False
         self.relaxed_point = x[:nx]
@@ -279,25 +264,23 @@ class Cascade:
         return True
 
 
-def solve_lexicographic(H, f, A, lbx, ubx, lba, uba, structure: Structure) -> Solution | None:
-    """The lexicographic solution of a QP's priority levels (None if DAQP failed)."""
+def solve_lexicographic(H, f, A, lbx, ubx, lba, uba, structure: Structure) -> np.ndarray | None:
+    """The lexicographic solution of a QP's priority levels (None if DAQP failed). Whether the
+    bounds had to be relaxed is for `check_bounds` to tell, on the original data."""
     cascade = Cascade(H, f, A, lbx, ubx, lba, uba, structure)
     x = cascade.levels()
-    if x is not None:
-        return Solution(x, False, cascade.solves)
-    if not cascade.relax():
-        return None
+    if x is not None or not cascade.relax():
+        return x
     x = cascade.levels()
     # (the relaxation's own point meets the widened bounds: better than no answer, if DAQP fails)
-    return Solution(cascade.relaxed_point if x is None else x, True, cascade.solves)
+    return cascade.relaxed_point if x is None else x
 
 
 @dataclass
 class BoundCheck:
-    """Which joint/Cartesian acceleration bounds a solution crosses, and by how much."""
+    """Which joint/Cartesian acceleration bounds a solution crosses."""
 
     violated: list[int]  # indices into the bound rows, in row order
-    violation: list[float]  # in the bound's own unit (rad/s² or m/s²)
 
     @property
     def holds(self) -> bool:
@@ -311,4 +294,4 @@ def check_bounds(bound_rows: range, A: np.ndarray, lba: np.ndarray, uba: np.ndar
     excess = np.maximum(lo - value, value - hi)
     crossed = np.where(value < lo, lo, hi)
     bad = np.flatnonzero(excess > BOUND_TOLERANCE * np.maximum(1.0, np.abs(crossed)))
-    return BoundCheck([int(i) for i in bad], [float(excess[i]) for i in bad])
+    return BoundCheck([int(i) for i in bad])
