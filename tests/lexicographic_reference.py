@@ -217,6 +217,28 @@ def active_set_qp(H, f, C, lower, upper, x0, max_iter: int = 1000) -> np.ndarray
     raise ReferenceError("active-set QP: no convergence")
 
 
+def exact_qp(H, f, C, lower, upper, x0) -> np.ndarray:
+    """min ½xᵀHx + fᵀx s.t. lower ≤ C x ≤ upper by two solvers, keeping the better answer that
+    holds the rows (to CERTIFY_TOL): the active-set method above and HiGHS's QP solver. Each was
+    seen to fail where the other did not: HiGHS reporting "Optimal" outside the rows, and the
+    active-set method stopping at a bend 1.6 × the least one on a degenerate face (iiwa14, two
+    levels, a bent level above)."""
+    candidates = []
+    try:
+        candidates.append(active_set_qp(H, f, C, lower, upper, x0))
+    except ReferenceError:
+        pass
+    free = np.full(x0.size, np.inf)
+    x, _ = solve_highs(f, C, lower, upper, -free, free, Q=H)
+    if x is not None:
+        candidates.append(x)
+    scale = np.maximum(1.0, np.minimum(np.abs(lower), np.abs(upper)))
+    held = [x for x in candidates if np.all(np.maximum(lower - C @ x, C @ x - upper) <= CERTIFY_TOL * scale)]
+    if not held:
+        raise ReferenceError("QP: neither solver found a point that holds the rows")
+    return min(held, key=lambda x: 0.5 * x @ H @ x + f @ x)
+
+
 # -- the problem data ----------------------------------------------------------------------------
 
 
@@ -389,7 +411,7 @@ def _exact_level(hard: HardRows, a: np.ndarray, N: np.ndarray, lv: Level):
     if w is None or r == 0:
         # (i.a) the smallest bend: min ‖task_w w + c‖²
         C = np.vstack([hard_w, np.eye(r + 1)[-1:]])  # hard rows and 0 ≤ s ≤ 1
-        w = active_set_qp(task_w.T @ task_w, task_w.T @ c, C, np.append(lz, 0.0), np.append(uz, 1.0), np.zeros(r + 1))
+        w = exact_qp(task_w.T @ task_w, task_w.T @ c, C, np.append(lz, 0.0), np.append(uz, 1.0), np.zeros(r + 1))
         delta = task_w @ w + c
         # (i.b) with δ pinned to δ*: the largest s
         eps = DELTA_PIN_TOL * max(1.0, np.abs(xd).max())
@@ -408,7 +430,7 @@ def _least_squares(hard: HardRows, a: np.ndarray, N: np.ndarray, lv: Level) -> n
     A = lv.J @ N
     c = lv.J @ a + lv.bias - lv.target  # residual at z = 0
     Gz, lz, uz = _z_rows(hard, a, N)
-    z = active_set_qp(A.T @ A, A.T @ c, Gz, lz, uz, np.zeros(r))
+    z = exact_qp(A.T @ A, A.T @ c, Gz, lz, uz, np.zeros(r))
     return a + N @ z
 
 
@@ -420,5 +442,5 @@ def _energy(hard: HardRows, a: np.ndarray, N: np.ndarray, M: np.ndarray, a0: np.
     L = np.linalg.cholesky(M)  # ½‖Lᵀ(a + N z − a0)‖²
     T = L.T @ N
     c = L.T @ (a - a0)
-    z = active_set_qp(T.T @ T, T.T @ c, Gz, lz, uz, np.zeros(r))
+    z = exact_qp(T.T @ T, T.T @ c, Gz, lz, uz, np.zeros(r))
     return a + N @ z
