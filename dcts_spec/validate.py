@@ -75,7 +75,7 @@ class ValidationReport:
             "limits": {
                 "q_min": finite(lim.q_min), "q_max": finite(lim.q_max), "v_max": finite(lim.v_max),
                 "a_max": finite(lim.a_max), "tau_max": finite(lim.tau_max),
-                "cartesian": [{"frame": b.frame, "axis": "xyz"[b.axis], "min": b.c_min if np.isfinite(b.c_min) else None,
+                "cartesian": [{"frame": b.frame, "axis": b.label, "normal": list(b.direction), "min": b.c_min if np.isfinite(b.c_min) else None,
                                "max": b.c_max if np.isfinite(b.c_max) else None} for b in self.robot.cartesian_bounds],
             },
             "gravity_torque_ratio": self.gravity_torque_ratio,
@@ -104,7 +104,8 @@ class ValidationReport:
         if np.isfinite(lim.a_max).any():
             lines.append(f"              |q̈| ≤ {fmt(lim.a_max, deg)} deg/s²")
         for b in robot.cartesian_bounds:
-            lines.append(f"              {b.c_min:.4g} ≤ {b.frame}.{'xyz'[b.axis]} ≤ {b.c_max:.4g} m")
+            lines.append(f"              {b.c_min:.4g} ≤ {b.frame}.{b.label} ≤ {b.c_max:.4g} m"
+                         + ("" if b.axis is not None else f" (world normal {fmt(np.array(b.direction))})"))
         lines.append(f"  gravity     needs {self.gravity_torque_ratio * 100:.0f}% of the torque limit at the initial configuration")
         lines.extend(f"  {d}" for d in self.diagnostics)
         return "\n".join(lines)
@@ -124,6 +125,9 @@ def validate_spec(spec: Spec) -> ValidationReport:
     if any(d.severity == "error" for d in diags):
         raise SpecError(diags)
     q0 = initial_configuration(spec, robot)
+    diags += _check_cartesian_bounds(spec, robot, q0)
+    if any(d.severity == "error" for d in diags):
+        raise SpecError(diags)
     levels, level_diags = _levels(spec, robot, q0)
     diags += level_diags
     gravity = pin.computeGeneralizedGravity(robot.model, robot.model.createData(), q0)
@@ -139,6 +143,49 @@ def validate_spec(spec: Spec) -> ValidationReport:
             )
         )
     return ValidationReport(spec, robot, q0, levels, gravity, diags)
+
+
+def _check_cartesian_bounds(spec: Spec, robot: Robot, q0: np.ndarray) -> list[Diagnostic]:
+    """A Cartesian bound crossed at the initial configuration is an error (the controller could
+    only relax it from the first step); a constant position target on the bound's frame beyond it
+    is a warning (the task will be scaled or bent there, as the bound asks)."""
+    diags: list[Diagnostic] = []
+    data = robot.model.createData()
+    pin.framesForwardKinematics(robot.model, data, q0)
+    for i, b in enumerate(robot.cartesian_bounds):
+        c = float(b.coordinate(data.oMf[robot.model.getFrameId(b.frame)].translation))
+        text = _bound_text(b)
+        if not b.c_min - 1e-9 <= c <= b.c_max + 1e-9:
+            diags.append(spec.source.diagnostic(("limits", "cartesian", i),
+                                                f"{b.frame}.{b.label} starts at {c:.4g} m, outside its bound {text}"))
+        for k, t in enumerate(spec.tasks):
+            reference = t.reference
+            if t.frame != b.frame or reference is None or reference.position is None or t.type not in ("position", "pose"):
+                continue
+            target = float(b.coordinate(np.asarray(reference.position, dtype=float)))
+            if not b.c_min <= target <= b.c_max:
+                diags.append(spec.source.diagnostic(
+                    ("tasks", k, "reference", "position"),
+                    f"the target puts {b.frame}.{b.label} at {target:.4g} m, outside its bound {text} "
+                    f"(limits.cartesian[{i}]): the task will stop at the bound", "warning"))
+        waypoints = spec.scenario.waypoints if spec.scenario is not None else None
+        task = next((t for t in spec.tasks if waypoints is not None and t.name == waypoints.task), None)
+        if task is None or task.frame != b.frame or task.type not in ("position", "pose"):
+            continue
+        for k, point in enumerate(waypoints.points):  # (their position first, as in the reference layout)
+            target = float(b.coordinate(np.asarray(point[:3], dtype=float)))
+            if not b.c_min <= target <= b.c_max:
+                diags.append(spec.source.diagnostic(
+                    ("scenario", "waypoints", "points", k),
+                    f"this waypoint puts {b.frame}.{b.label} at {target:.4g} m, outside its bound {text} "
+                    f"(limits.cartesian[{i}]): the task will stop at the bound", "warning"))
+    return diags
+
+
+def _bound_text(b) -> str:
+    lo = "" if not np.isfinite(b.c_min) else f"{b.c_min:.4g} m ≤ "
+    hi = "" if not np.isfinite(b.c_max) else f" ≤ {b.c_max:.4g} m"
+    return f"{lo}{b.frame}.{b.label}{hi}"
 
 
 def initial_configuration(spec: Spec, robot: Robot) -> np.ndarray:
@@ -206,7 +253,12 @@ def _check_scenario(spec: Spec, robot: Robot) -> list[Diagnostic]:
         q0 = np.array(to_si(list(sc.initial_q), sc.unit))
         outside = np.flatnonzero((q0 < robot.limits.q_min) | (q0 > robot.limits.q_max))
         if outside.size:
-            diags.append(src.diagnostic(at + ("initial_q",), f"joints {[int(j) + 1 for j in outside]} start outside their position limits"))
+            unit = sc.unit
+            scale = 180.0 / np.pi if unit == "deg" else 1.0
+            where = "; ".join(f"joint {j + 1} ({robot.joint_names[j]}) at {q0[j] * scale:.4g}, limits "
+                              f"[{robot.limits.q_min[j] * scale:.4g}, {robot.limits.q_max[j] * scale:.4g}] {unit}"
+                              for j in outside)
+            diags.append(src.diagnostic(at + ("initial_q",), f"joints start outside their position limits: {where}"))
     frames = [f.name for f in robot.model.frames]
     for i, d in enumerate(sc.disturbances):
         where = at + ("disturbances", i)
@@ -284,6 +336,7 @@ def _levels(spec: Spec, robot: Robot, q: np.ndarray) -> tuple[list[LevelReport],
 
 def _numeric_jacobian(task: CartesianTask | JointTask, model: pin.Model, data: pin.Data) -> np.ndarray:
     if isinstance(task, CartesianTask):
-        J = pin.getFrameJacobian(model, data, model.getFrameId(task.frame), pin.LOCAL_WORLD_ALIGNED)
-        return J[task.rows, :]
+        frame = model.getFrameId(task.frame)
+        J = pin.getFrameJacobian(model, data, frame, pin.LOCAL_WORLD_ALIGNED)
+        return task.numeric_jacobian(J, data.oMf[frame].rotation)
     return task.selection_matrix()

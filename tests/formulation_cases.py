@@ -31,7 +31,6 @@ HOME = {
     "iiwa14": np.array([0.0, 0.6, 0.0, -1.2, 0.0, 0.8, 0.0]),
     "panda": np.array([0.0, -0.3, 0.0, -2.0, 0.0, 1.8, 0.8]),
 }
-AXIS_ROW = {"x": 0, "y": 1, "z": 2, "rx": 3, "ry": 4, "rz": 5}
 
 # Large limits so that the "no bound active" properties see no active bound (checked anyway).
 WIDE_LIMITS = """
@@ -128,8 +127,7 @@ def numeric_tasks(spec: Spec, joint_names: list[str]) -> list[NumericTask]:
         else:
             position = None if ref is None or ref.position is None else np.array(ref.position, dtype=float)
             rotation = None if ref is None or ref.rpy is None else pin.rpy.rpyToMatrix(*to_si(list(ref.rpy), ref.unit))
-            rows = [AXIS_ROW[a] for a in t.axis_names]
-            out.append(NumericTask(t.priority, t.type, kp, kd, frame=t.frame, rows=rows, position=position, rotation=rotation))
+            out.append(NumericTask(t.priority, t.type, kp, kd, frame=t.frame, axes=tuple(t.axis_names), position=position, rotation=rotation))
     return out
 
 

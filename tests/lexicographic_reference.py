@@ -34,6 +34,7 @@ INF = highspy.kHighsInf
 FEASIBILITY_TOLS = (1e-10, 1e-9, 1e-8)  # HiGHS primal/dual feasibility tolerances, tried in turn
 CERTIFY_TOL = 1e-8  # a stage's a may break a hard row by at most this, relative to max(1, |bound|)
 DELTA_PIN_TOL = 1e-9  # |δ − δ*| allowed when maximizing s on a bent level, relative to max(1, |ẍ_d|)
+QP_TIME_LIMIT = 2.0  # s, per HiGHS solve
 NULL_TOL = 1e-9  # singular values below this (relative to max(1, σ_max)) span the null space
 
 
@@ -97,7 +98,7 @@ def solve_highs(c, A, lA, uA, lx, ux, Q=None, sense_max: bool = False):
     status = ""
     for tol in FEASIBILITY_TOLS:
         x, status = _solve_highs(c, A, lA, uA, lx, ux, Q, sense_max, tol)
-        if x is not None or status == "Infeasible":
+        if x is not None or status in ("Infeasible", "Time limit reached"):
             return x, status
     return None, status
 
@@ -111,6 +112,9 @@ def _solve_highs(c, A, lA, uA, lx, ux, Q, sense_max, tol):
     h.setOptionValue("primal_feasibility_tolerance", tol)
     h.setOptionValue("dual_feasibility_tolerance", tol)
     h.setOptionValue("presolve", "off")
+    # HiGHS's QP solver was seen to cycle for ever on a degenerate bend stage (panda, 4 levels):
+    # a bounded search, then the active-set method's answer stands alone (exact_qp)
+    h.setOptionValue("time_limit", QP_TIME_LIMIT)
     lp = highspy.HighsLp()
     lp.num_col_ = nx
     lp.num_row_ = A.shape[0]

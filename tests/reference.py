@@ -21,11 +21,56 @@ class NumericTask:
     kp: np.ndarray
     kd: np.ndarray
     frame: str | None = None
-    rows: list[int] | None = None  # rows of [v; ω] (Cartesian)
+    axes: tuple[str, ...] | None = None  # Cartesian: x, y, z (world), rx, ry, rz (see orientation_terms)
     joints: list[int] | None = None  # joint indices (joint task)
     position: np.ndarray | None = None
     rotation: np.ndarray | None = None
     q: np.ndarray | None = None
+
+
+LINEAR = ("x", "y", "z")
+OWN = {"rx": 0, "ry": 1, "rz": 2}
+
+
+def orientation_terms(R: np.ndarray, R_d: np.ndarray | None, axes: tuple[str, ...]):
+    """(B, error) of an orientation task, from Pinocchio's quaternions: the task velocity is Bᵀω.
+
+    All three axes: world axes, log3(R_d Rᵀ). Two of the frame's own axes: the rotation that turns
+    the free own axis onto the target's (Quaternion.FromTwoVectors), as a rotation vector, along
+    the two. One own axis k: the twist 2 atan2(q_k, q_w) of Rᵀ R_d's quaternion, wrapped to ±π
+    (its task velocity is ψ's own rate: `twist_terms`; B = R e_k serves a pure damping task)."""
+    if len(axes) == 3:
+        B = np.eye(3)[:, [OWN[a] for a in axes]]
+        return B, np.zeros(3) if R_d is None else B.T @ pin.log3(R_d @ R.T)
+    B = R[:, [OWN[a] for a in axes]]
+    if R_d is None:
+        return B, np.zeros(len(axes))
+    if len(axes) == 2:
+        (free,) = set(OWN) - set(axes)
+        k = OWN[free]
+        swing = pin.log3(pin.Quaternion.FromTwoVectors(R[:, k], R_d[:, k]).matrix())
+        return B, B.T @ swing
+    q = pin.Quaternion(R.T @ R_d)
+    twist = 2.0 * np.arctan2(q.vec()[OWN[axes[0]]], q.w)
+    return B, np.array([(twist + np.pi) % (2 * np.pi) - np.pi])
+
+
+def twist(model: pin.Model, fid: int, R_d: np.ndarray, axis: str, q: np.ndarray) -> float:
+    """The twist error of `orientation_terms` at q."""
+    data = model.createData()
+    pin.framesForwardKinematics(model, data, q)
+    return float(orientation_terms(data.oMf[fid].rotation, R_d, (axis,))[1][0])
+
+
+def twist_terms(model: pin.Model, fid: int, R_d: np.ndarray, axis: str, q: np.ndarray, dq: np.ndarray, h: float = 1e-5):
+    """(J, J̇q̇, ψ) of a twist task by central differences of ψ(q): the task acceleration is
+    d²/dt² of −ψ, J = −∂ψ/∂q and J̇q̇ = −d²ψ(q + t q̇)/dt² at t = 0 (revolute joints: q adds)."""
+    psi = twist(model, fid, R_d, axis, q)
+    J = np.array([-(twist(model, fid, R_d, axis, q + h * e) - twist(model, fid, R_d, axis, q - h * e)) / (2 * h)
+                  for e in np.eye(model.nv)])
+    t = 1e-4
+    bias = -(twist(model, fid, R_d, axis, q + t * dq) - 2 * psi + twist(model, fid, R_d, axis, q - t * dq)) / t**2
+    return J, bias, psi
 
 
 def task_terms(model: pin.Model, data: pin.Data, task: NumericTask, q: np.ndarray, dq: np.ndarray):
@@ -41,12 +86,21 @@ def task_terms(model: pin.Model, data: pin.Data, task: NumericTask, q: np.ndarra
         J6 = pin.getFrameJacobian(model, data, fid, pin.LOCAL_WORLD_ALIGNED)
         bias6 = pin.getFrameClassicalAcceleration(model, data, fid, pin.LOCAL_WORLD_ALIGNED).vector
         M = data.oMf[fid]
-        error6 = np.zeros(6)
-        if task.position is not None:
-            error6[:3] = task.position - M.translation
-        if task.rotation is not None:
-            error6[3:] = pin.log3(task.rotation @ M.rotation.T)
-        J, bias, error = J6[task.rows], bias6[task.rows], error6[task.rows]
+        rows = []
+        for axis in task.axes:
+            if axis in LINEAR:
+                k = LINEAR.index(axis)
+                error = 0.0 if task.position is None else task.position[k] - M.translation[k]
+                rows.append((J6[k], bias6[k], error))
+        angular = tuple(a for a in task.axes if a not in LINEAR)
+        if len(angular) == 1 and task.rotation is not None:
+            rows.append(twist_terms(model, fid, task.rotation, angular[0], q, dq))
+        elif angular:
+            B, error = orientation_terms(M.rotation, task.rotation, angular)
+            rows += [(b @ J6[3:], b @ bias6[3:], e) for b, e in zip(B.T, error)]
+        order = [a for a in task.axes if a in LINEAR] + list(angular)
+        rows = [rows[order.index(a)] for a in task.axes]
+        J, bias, error = (np.array([r[i] for r in rows]) for i in range(3))
     target = task.kp * error - task.kd * (J @ dq)
     return J, bias, target
 

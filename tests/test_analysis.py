@@ -129,6 +129,8 @@ def test_summary_definitions(case) -> None:
     assert summary["realtime_factor"] == pytest.approx(0.08 / 0.04)
     errors = series.task_errors["reach"]
     assert summary["task_rms_error"]["reach"] == pytest.approx(np.sqrt(np.mean(np.sum(errors**2, axis=1))))
+    tail = errors[-max(1, round(0.1 * len(errors))):]
+    assert summary["task_final_error"]["reach"] == pytest.approx(np.max(np.linalg.norm(tail, axis=1)))
     assert summary["primary_mean_acceleration_error"] == pytest.approx(
         np.mean(np.linalg.norm(series.acceleration_errors[1], axis=1)))
     assert summary["acceleration_energy_integral"] == pytest.approx(np.sum(series.acceleration_energy) * 0.002)

@@ -10,6 +10,7 @@ import pytest
 from dcts_spec import build_controller
 from dcts_spec.robot.builtin import load_builtin_model
 from dcts_spec.spec import load_spec_text
+from reference import OWN, orientation_terms, twist
 
 Q = np.array([0.1, 0.6, -0.2, -1.2, 0.3, 1.0, 0.2])
 DQ = np.array([0.2, -0.1, 0.3, 0.1, -0.2, 0.4, 0.1])
@@ -76,15 +77,55 @@ def test_feedforward_enters_the_desired_acceleration():
     np.testing.assert_allclose(tool_acceleration(result, Q, DQ)[:3], desired, rtol=1e-8, atol=1e-8)
 
 
-def test_orientation_error_is_the_world_rotation_vector_on_the_chosen_axes():
-    c = controller(f"{{name: point, type: orientation, frame: tool, axes: [ry, rx], priority: 1, "
-                   f"gains: {{kp: [30, 60], kd: [8, 12]}}, reference: {{rpy: {RPY.tolist()}}}}}")
-    result = c.step(Q, DQ)
+def test_orientation_on_all_axes_is_the_world_rotation_vector():
+    c = controller(f"{{name: point, type: orientation, frame: tool, axes: [rz, rx, ry], priority: 1, "
+                   f"gains: {{kp: 30, kd: 8}}, reference: {{rpy: {RPY.tolist()}}}}}")
     placement, J, _ = tool_state(Q, DQ)
     error = pin.log3(pin.rpy.rpyToMatrix(*RPY) @ placement.rotation.T)
-    omega = J[3:] @ DQ
-    desired = np.array([30 * error[1] - 8 * omega[1], 60 * error[0] - 12 * omega[0]])  # rows in the order written
-    np.testing.assert_allclose(tool_acceleration(result, Q, DQ)[[4, 3]], desired, rtol=1e-8, atol=1e-8)
+    desired = 30 * error - 8 * (J[3:] @ DQ)
+    np.testing.assert_allclose(tool_acceleration(c.step(Q, DQ), Q, DQ)[[5, 3, 4]], desired[[2, 0, 1]], rtol=1e-8, atol=1e-8)
+
+
+@pytest.mark.parametrize("axes", [("ry", "rx"), ("rx", "rz"), ("rz", "ry"), ("rz",), ("rx",), ("ry",)])
+def test_orientation_subsets_are_the_swing_or_twist_about_the_frames_own_axes(axes):
+    """Two own axes: the swing that points the free own axis like the target's; one own axis: the
+    twist about it. Checked against Pinocchio's quaternions (tests/reference.orientation_terms),
+    at a target 150° away about the free axis and 0.4 rad off otherwise."""
+    placement, J, bias = tool_state(Q, DQ)
+    free = [a for a in ("rx", "ry", "rz") if a not in axes]
+    turn = np.zeros(3)
+    turn[OWN[free[0]]] = np.deg2rad(150.0)
+    target = placement.rotation @ pin.exp3(np.array([0.3, -0.2, 0.15])) @ pin.exp3(turn)
+    rpy = pin.rpy.matrixToRpy(target)
+    c = controller(f"{{name: point, type: orientation, frame: tool, axes: [{', '.join(axes)}], priority: 1, "
+                   f"gains: {{kp: 30, kd: 8}}, reference: {{rpy: {rpy.tolist()}}}}}")
+    ddq = c.step(Q, DQ).ddq
+    if len(axes) == 2:
+        B, error = orientation_terms(placement.rotation, target, axes)
+        achieved = B.T @ (J[3:] @ ddq + bias[3:])
+        np.testing.assert_allclose(achieved, 30 * error - 8 * (B.T @ J[3:] @ DQ), rtol=1e-8, atol=1e-8)
+    else:  # the twist's own rate and acceleration, by differences of ψ along the motion
+        model = load_builtin_model("iiwa14")
+        fid = model.getFrameId("tool")
+        h = 1e-4
+        psi = [twist(model, fid, target, axes[0], Q + t * DQ + 0.5 * t**2 * ddq) for t in (-h, 0.0, h)]
+        rate, acceleration = (psi[2] - psi[0]) / (2 * h), (psi[2] - 2 * psi[1] + psi[0]) / h**2
+        # the error ψ is target − actual: the task acceleration is −ψ̈, its velocity −ψ̇
+        np.testing.assert_allclose(-acceleration, 30 * psi[1] - 8 * -rate, rtol=1e-5, atol=1e-5)
+
+
+def test_a_pointing_task_ignores_the_spin_about_its_free_axis():
+    """[rx, ry]: targets that differ only by a turn about the target's own z give the same command."""
+    placement, _, _ = tool_state(Q, DQ)
+    base = placement.rotation @ pin.exp3(np.array([0.3, -0.2, 0.0]))
+    commands = []
+    for angle in (0.0, 90.0, 179.9, -179.9):
+        rpy = pin.rpy.matrixToRpy(base @ pin.exp3(np.array([0.0, 0.0, np.deg2rad(angle)])))
+        c = controller(f"{{name: point, type: orientation, frame: tool, axes: [rx, ry], priority: 1, "
+                       f"gains: {{kp: 30, kd: 8}}, reference: {{rpy: {rpy.tolist()}}}}}")
+        commands.append(c.step(Q, DQ).tau)
+    for tau in commands[1:]:
+        np.testing.assert_allclose(tau, commands[0], rtol=1e-9, atol=1e-9)
 
 
 @pytest.mark.parametrize("distance", [0.01, 0.3])

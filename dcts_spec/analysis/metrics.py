@@ -9,6 +9,8 @@ Definitions (N samples t_k = k T; violations are 0 when a limit holds or does no
   each joint/Cartesian bound that gave way, its number of steps and the first and last time
 - min_scaling = min over samples and levels of the task scalings
 - task_rms_error[t] = sqrt(mean_k ‖Δx_t,k‖²), task_mean_error[t] = mean_k ‖Δx_t,k‖ (SI units)
+- task_final_error[t] = max ‖Δx_t,k‖ over the last 10 % of the samples: a task still moving or
+  oscillating at the end shows its amplitude here, where an RMS over the run would hide it
 - mean_acceleration_error[p] = mean_k ‖J_p a_k + J̇_p q̇_k − ẍ_d,p,k‖ with the actual acceleration
   a_k = (q̇_{k+1} − q̇_k)/T; primary_mean_acceleration_error is the one of the first priority
 - acceleration_energy_integral = Σ_k ½(τ_k − g_k)ᵀM_k⁻¹(τ_k − g_k) T
@@ -71,6 +73,7 @@ def summarize(log: SimulationLog, series: TimeSeries, robot: Robot, priorities: 
         "min_scaling": _peak(log.scaling, np.min, default=1.0),
         "task_rms_error": {t: _rms_norm(e) for t, e in series.task_errors.items()},
         "task_mean_error": {t: _mean_norm(e) for t, e in series.task_errors.items()},
+        "task_final_error": {t: _final_norm(e) for t, e in series.task_errors.items()},
         "primary_mean_acceleration_error": acceleration_errors[str(priorities[0])],
         "mean_acceleration_error": acceleration_errors,
         "acceleration_energy_integral": float(np.sum(series.acceleration_energy) * log.period),
@@ -109,6 +112,13 @@ def _mean_norm(errors: np.ndarray) -> float:
     return float(np.mean(np.linalg.norm(errors, axis=1))) if errors.size else 0.0
 
 
+def _final_norm(errors: np.ndarray, fraction: float = 0.1) -> float:
+    if not errors.size:
+        return 0.0
+    tail = errors[-max(1, int(round(fraction * len(errors)))):]
+    return float(np.max(np.linalg.norm(tail, axis=1)))
+
+
 def _rms_norm(errors: np.ndarray) -> float:
     return float(np.sqrt(np.mean(np.sum(errors**2, axis=1)))) if errors.size else 0.0
 
@@ -116,7 +126,7 @@ def _rms_norm(errors: np.ndarray) -> float:
 def _cartesian_violation(series: TimeSeries, robot: Robot) -> float:
     worst = 0.0
     for b in robot.cartesian_bounds:
-        c = series.frame_positions[b.frame][:, b.axis]
+        c = b.coordinate(series.frame_positions[b.frame])
         worst = max(worst, _peak(np.maximum(_excess(c, np.array(b.c_max)), _excess(-c, -np.array(b.c_min)))))
     return worst
 

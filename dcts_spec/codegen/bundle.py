@@ -383,8 +383,11 @@ def _model_texts(model: dict) -> tuple[str, str]:
 
 def _golden_tolerances(formulation: str) -> dict[str, str]:
     """How closely the C must replay the Python runtime (templates/test.c.in says why)."""
-    weighted = formulation in ("qp_mt", "qp_md")
-    return {"GOLDEN_TOLERANCE": "1e-5" if weighted else "1e-8", "GOLDEN_RELAXED_TOLERANCE": "1e-4" if weighted else "1e-8"}
+    if formulation in ("qp_mt", "qp_md"):
+        return {"GOLDEN_TOLERANCE": "1e-5", "GOLDEN_RELAXED_TOLERANCE": "1e-4"}
+    if formulation == "dcts":
+        return {"GOLDEN_TOLERANCE": "1e-6", "GOLDEN_RELAXED_TOLERANCE": "1e-6"}
+    return {"GOLDEN_TOLERANCE": "1e-8", "GOLDEN_RELAXED_TOLERANCE": "1e-8"}
 
 
 def generate_sources(

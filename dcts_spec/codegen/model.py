@@ -60,7 +60,7 @@ def model_digest(robot: Robot) -> str:
             _floats(h, getattr(limits, name))
     for bound in robot.cartesian_bounds:
         _text(h, bound.frame)
-        _floats(h, [bound.axis, bound.c_min, bound.c_max, bound.v_max, bound.a_max])
+        _floats(h, [*bound.direction, bound.c_min, bound.c_max, bound.v_max, bound.a_max])
     return h.hexdigest()
 
 

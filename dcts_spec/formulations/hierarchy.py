@@ -118,14 +118,15 @@ def level_structure(problem: ControlProblem) -> LevelStructure:
     the tasks above leave); an over-constrained level above it is a spec error.
     """
     levels = problem.levels
-    f = ca.Function("jacobians", [problem.q], [*[lv.jacobian for lv in levels], problem.mass_matrix])
+    # (a twist task's Jacobian is its error's gradient, which depends on a run-time target: sampled too)
+    f = ca.Function("jacobians", [problem.q, problem.ref], [*[lv.jacobian for lv in levels], problem.mass_matrix])
     robot = problem.robot
     rng = np.random.default_rng(0)  # seeded: a spec always compiles to the same structure
     lo = np.where(np.isfinite(robot.limits.q_min), robot.limits.q_min, -np.pi)
     hi = np.where(np.isfinite(robot.limits.q_max), robot.limits.q_max, np.pi)
     deficient = np.zeros(len(levels), dtype=bool)
     for _ in range(RANK_SAMPLES):
-        out = [np.array(o) for o in f(rng.uniform(lo, hi))]
+        out = [np.array(o) for o in f(rng.uniform(lo, hi), rng.uniform(-1.0, 1.0, problem.ref.shape[0]))]
         jacobians, M = out[:-1], out[-1]
         N = np.eye(problem.n)
         Minv = np.linalg.inv(M)

@@ -1,4 +1,4 @@
-"""Cartesian bounds on one world axis of a frame (the paper's limited space, rows of J_c)."""
+"""Cartesian bounds: a frame's origin along a world axis or a plane normal (rows of J_c)."""
 
 from __future__ import annotations
 
@@ -15,9 +15,10 @@ def cartesian_rows(bounds: tuple[CartesianBound, ...], robot: SymbolicRobot, dt:
     parts = []
     for b in bounds:
         position, _ = robot.frame_placement(b.frame)
-        jacobian = robot.frame_jacobian(b.frame)[b.axis, :]
-        bias = robot.frame_bias_acceleration(b.frame)[b.axis]
-        c, c_dot = position[b.axis], ca.mtimes(jacobian, robot.dq)
+        d = ca.DM(b.direction)
+        jacobian = ca.mtimes(d.T, robot.frame_jacobian(b.frame)[0:3, :])
+        bias = ca.dot(d, robot.frame_bias_acceleration(b.frame)[0:3])
+        c, c_dot = ca.dot(d, position), ca.mtimes(jacobian, robot.dq)
         lo, hi = acceleration_bounds(c, c_dot, b.c_min, b.c_max, b.v_max, float("inf"), b.a_max, dt)
-        parts.append(AccelerationRows(jacobian, bias, lo, hi, [f"cartesian:{b.frame}.{'xyz'[b.axis]}"]))
+        parts.append(AccelerationRows(jacobian, bias, lo, hi, [f"cartesian:{b.frame}.{b.label}"]))
     return AccelerationRows.stack(parts, robot.nv)

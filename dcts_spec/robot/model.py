@@ -43,14 +43,25 @@ class JointLimits:
 
 @dataclass(frozen=True)
 class CartesianBound:
-    """c_min ≤ p_frame[axis] ≤ c_max, in world coordinates (the paper's limited space)."""
+    """c_min ≤ dᵀ p_frame ≤ c_max: the frame origin between two planes of world normal d (a unit
+    vector; a world axis for the paper's limited space, any direction for a tilted table)."""
 
     frame: str
-    axis: int  # 0, 1, 2 for x, y, z
+    direction: tuple[float, float, float]
+    label: str  # x, y, z, or plane<i> (the index in limits.cartesian)
     c_min: float  # -inf if none
     c_max: float  # +inf if none
     v_max: float  # inf if none
     a_max: float  # braking acceleration used by the viability bound
+
+    @property
+    def axis(self) -> int | None:
+        """0, 1, 2 if the normal is the world x, y, z axis, else None."""
+        return "xyz".index(self.label) if self.label in ("x", "y", "z") else None
+
+    def coordinate(self, position: np.ndarray) -> np.ndarray:
+        """dᵀp of positions (…, 3)."""
+        return np.asarray(position) @ np.asarray(self.direction)
 
 
 @dataclass

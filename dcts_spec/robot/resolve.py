@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import contextlib
+import os
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -56,7 +59,8 @@ def _load_model(spec: Spec, diags: list[Diagnostic]) -> tuple[pin.Model | None, 
             diags.append(src.diagnostic(where, f"URDF file not found: {path}"))
             return None, path
     try:
-        full = pin.buildModelFromUrdf(str(path))
+        with _quiet_stderr():  # urdfdom prints its parser's complaint itself; the diagnostic says it
+            full = pin.buildModelFromUrdf(str(path))
     except Exception as exc:  # Pinocchio raises plain RuntimeErrors for bad URDFs
         diags.append(src.diagnostic(where, f"cannot load the URDF {path}: {exc}"))
         return None, path
@@ -67,7 +71,26 @@ def _load_model(spec: Spec, diags: list[Diagnostic]) -> tuple[pin.Model | None, 
         diags.append(src.diagnostic(("robot", "locked_joints", j), f"no joint {j!r} to lock{hint}"))
     if unknown:
         return None, path
-    return lock_joints(full, locked), path
+    model = lock_joints(full, locked)
+    if model.nv == 0:
+        movable = "" if not locked else f" once {', '.join(locked)} are locked"
+        diags.append(src.diagnostic(where, f"the URDF {path.name} has no movable joint{movable}: nothing to control"))
+        return None, path
+    return model, path
+
+
+@contextlib.contextmanager
+def _quiet_stderr():
+    """Silence the process's stderr (file descriptor 2, which C++ libraries write to directly)."""
+    sys.stderr.flush()
+    saved = os.dup(2)
+    try:
+        with open(os.devnull, "w") as null:
+            os.dup2(null.fileno(), 2)
+            yield
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
 
 
 def _check_joint_types(model: pin.Model, src: SourceMap, diags: list[Diagnostic]) -> None:
@@ -130,12 +153,14 @@ def _merge_limits(spec: Spec, urdf: JointLimits, n: int, diags: list[Diagnostic]
                 diags.append(
                     src.diagnostic(base + ("min",), f"min must be smaller than max (joint {j + 1}: {lo[j]:.4g} ≥ {hi[j]:.4g} rad)")
                 )
-            _outside(lo < urdf.q_min - 1e-9, base + ("min",), "below the URDF's lower limit", jp.allow_outside_urdf, src, diags)
-            _outside(hi > urdf.q_max + 1e-9, base + ("max",), "above the URDF's upper limit", jp.allow_outside_urdf, src, diags)
+            _outside(lo, urdf.q_min, lo < urdf.q_min - 1e-9, "rad", base + ("min",), "below the URDF's lower limit",
+                     jp.allow_outside_urdf, src, diags)
+            _outside(hi, urdf.q_max, hi > urdf.q_max + 1e-9, "rad", base + ("max",), "above the URDF's upper limit",
+                     jp.allow_outside_urdf, src, diags)
             q_min, q_max = lo, hi
-    v_max = _symmetric(lim.joint_velocity, "joint_velocity", urdf.v_max, "velocity", n, src, diags)
-    a_max = _symmetric(lim.joint_acceleration, "joint_acceleration", urdf.a_max, None, n, src, diags)
-    tau_max = _symmetric(lim.joint_torque, "joint_torque", urdf.tau_max, "effort", n, src, diags)
+    v_max = _symmetric(lim.joint_velocity, "joint_velocity", urdf.v_max, "velocity", "rad/s", n, src, diags)
+    a_max = _symmetric(lim.joint_acceleration, "joint_acceleration", urdf.a_max, None, "rad/s²", n, src, diags)
+    tau_max = _symmetric(lim.joint_torque, "joint_torque", urdf.tau_max, "effort", "Nm", n, src, diags)
     return JointLimits(q_min=q_min, q_max=q_max, v_max=v_max, tau_max=tau_max, a_max=a_max)
 
 
@@ -144,6 +169,7 @@ def _symmetric(
     key: str,
     urdf: np.ndarray,
     urdf_name: str | None,
+    unit: str,
     n: int,
     src: SourceMap,
     diags: list[Diagnostic],
@@ -158,43 +184,70 @@ def _symmetric(
     values = _vector(section.max, section.unit, n, path, src, diags, "max")
     if values is None:
         return urdf
-    _positive(values, path, src, diags)
+    _positive(values, unit, path, src, diags)
     if urdf_name is not None:
-        _outside(values > urdf + 1e-9, path, f"above the URDF's {urdf_name} limit", section.allow_outside_urdf, src, diags)
+        _outside(values, urdf, values > urdf + 1e-9, unit, path, f"above the URDF's {urdf_name} limit",
+                 section.allow_outside_urdf, src, diags)
     return values
 
 
-def _positive(values: np.ndarray, path: KeyPath, src: SourceMap, diags: list[Diagnostic]) -> None:
+def _positive(values: np.ndarray, unit: str, path: KeyPath, src: SourceMap, diags: list[Diagnostic]) -> None:
     bad = np.flatnonzero(values <= 0)
     if bad.size:
-        diags.append(src.diagnostic(path, f"must be > 0 (joint {bad[0] + 1}: {values[bad[0]]:.4g})"))
+        diags.append(src.diagnostic(path, f"must be > 0 (joint {bad[0] + 1}: {values[bad[0]]:.4g} {unit})"))
 
 
-def _outside(mask: np.ndarray, path: KeyPath, what: str, allowed: bool, src: SourceMap, diags: list[Diagnostic]) -> None:
-    joints = [int(j) + 1 for j in np.flatnonzero(mask)]
-    if not joints:
+def _outside(values: np.ndarray, urdf: np.ndarray, mask: np.ndarray, unit: str, path: KeyPath, what: str, allowed: bool,
+             src: SourceMap, diags: list[Diagnostic]) -> None:
+    """Joints whose spec limit is beyond the URDF's, with both values (in SI units)."""
+    joints = np.flatnonzero(mask)
+    if not joints.size:
         return
+    listed = ", ".join(f"joint {j + 1}: {values[j]:.4g} vs {urdf[j]:.4g} {unit}" for j in joints)
     if allowed:
-        diags.append(src.diagnostic(path, f"joints {joints}: {what} (widened on purpose: allow_outside_urdf)", "warning"))
+        diags.append(src.diagnostic(path, f"{what} ({listed}), widened on purpose: allow_outside_urdf", "warning"))
     else:
         diags.append(
-            src.diagnostic(path, f"joints {joints}: {what}; narrow it, or set allow_outside_urdf: true to widen on purpose")
+            src.diagnostic(path, f"{what} ({listed}); narrow it, or set allow_outside_urdf: true to widen on purpose")
         )
 
 
 def _cartesian_bounds(spec: Spec, model: pin.Model, diags: list[Diagnostic]) -> tuple[CartesianBound, ...]:
     out = []
+    names = [f.name for f in model.frames]
+    data = model.createData()
+    pin.framesForwardKinematics(model, data, pin.neutral(model))
     for i, c in enumerate(spec.limits.cartesian):
+        at = ("limits", "cartesian", i)
         if not model.existFrame(c.frame):
-            hint = did_you_mean(c.frame, [f.name for f in model.frames], n=3)
-            diags.append(spec.source.diagnostic(("limits", "cartesian", i, "frame"), f"no frame {c.frame!r}{hint}"))
+            diags.append(spec.source.diagnostic(at + ("frame",), f"no frame {c.frame!r}{did_you_mean(c.frame, names, n=3)}"))
             continue
+        if c.axis is not None:
+            direction, shift = np.eye(3)[AXIS_INDEX[c.axis]], 0.0
+        else:
+            direction, shift = np.asarray(c.normal, dtype=float) / np.linalg.norm(c.normal), 0.0
+            if c.expressed_in not in (None, "world"):
+                if not model.existFrame(c.expressed_in):
+                    hint = did_you_mean(c.expressed_in, names, n=3)
+                    diags.append(spec.source.diagnostic(at + ("expressed_in",), f"no frame {c.expressed_in!r}{hint}"))
+                    continue
+                frame = model.frames[model.getFrameId(c.expressed_in)]
+                if frame.parentJoint != 0:
+                    diags.append(spec.source.diagnostic(
+                        at + ("expressed_in",), f"frame {c.expressed_in!r} moves with joint {model.names[frame.parentJoint]!r}; "
+                        "a plane must be given in the world or in a frame fixed to it"))
+                    continue
+                # n̂ᵀ(Rᵀ(p − p_f)) = (R n̂)ᵀp − (R n̂)ᵀp_f: the same bounds on the world normal, shifted
+                placement = data.oMf[model.getFrameId(c.expressed_in)]
+                direction = placement.rotation @ direction
+                shift = float(direction @ placement.translation)
         out.append(
             CartesianBound(
                 frame=c.frame,
-                axis=AXIS_INDEX[c.axis],
-                c_min=-np.inf if c.min is None else c.min,
-                c_max=np.inf if c.max is None else c.max,
+                direction=tuple(float(v) for v in direction),
+                label=c.axis if c.axis is not None else f"plane{i}",
+                c_min=-np.inf if c.min is None else c.min + shift,
+                c_max=np.inf if c.max is None else c.max + shift,
                 v_max=np.inf if c.max_velocity is None else c.max_velocity,
                 a_max=c.max_acceleration,
             )

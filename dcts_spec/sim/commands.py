@@ -170,7 +170,7 @@ def describe(run: RunResult) -> str:
                  f"min scaling {s['min_scaling']:.3g}")
     for name, r in s.get("relaxed_bounds", {}).items():
         lines.append(f"  relaxed    {name}: {r['steps']} steps between t = {r['first']:.4g} s and {r['last']:.4g} s")
-    errors = ", ".join(f"{k} {v:.3g}" for k, v in s["task_rms_error"].items())
+    errors = ", ".join(f"{k} {v:.3g} (final {s['task_final_error'][k]:.3g})" for k, v in s["task_rms_error"].items())
     lines.append(f"  tasks      RMS error: {errors}; priority-1 mean acceleration error "
                  f"{s['primary_mean_acceleration_error']:.3g}")
     lines.append(f"  energy     ∫acceleration energy {s['acceleration_energy_integral']:.4g}, kinetic peaks: "

@@ -95,12 +95,8 @@ class WaypointFollower:
         assert isinstance(task, CartesianTask) and self._frame is not None
         pin.forwardKinematics(self._model, self._data, q)
         placement = pin.updateFramePlacement(self._model, self._data, self._frame)
-        error, start = np.zeros(6), 0
+        reference, start = {}, 0
         for field, _, size in self.slices:
-            value = point[start: start + size]
-            if field == "position":
-                error[:3] = value - placement.translation
-            else:
-                error[3:] = pin.log3(pin.rpy.rpyToMatrix(value) @ placement.rotation.T)
+            reference[field] = point[start: start + size]
             start += size
-        return float(np.linalg.norm(error[task.rows]))
+        return float(np.linalg.norm(task.numeric_error(placement.translation, placement.rotation, reference)))

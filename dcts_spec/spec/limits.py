@@ -41,10 +41,18 @@ class JointTorqueLimits(StrictModel):
 
 
 class CartesianLimit(StrictModel):
-    """Bound on one world coordinate of a frame's origin (the paper's limited space)."""
+    """Bounds on a frame's origin along a world axis (the paper's limited space) or along a plane's
+    normal: min ≤ n̂ᵀp ≤ max, i.e. the origin stays between two parallel planes (a half-space with
+    only one of them)."""
 
     frame: str
-    axis: Literal["x", "y", "z"]
+    axis: Literal["x", "y", "z"] | None = Field(None, description="a world axis; or give `normal`")
+    normal: list[Number] | None = Field(
+        None, min_length=3, max_length=3,
+        description="the plane's normal (3 values, any length: it is normalized); min/max are distances along it, m")
+    expressed_in: str | None = Field(
+        None, description="a frame fixed to the world (the base, or a frame you define on it) in which normal, "
+                          "min and max are given; default: world")
     min: Number | None = None
     max: Number | None = None
     max_velocity: Number | None = Field(None, gt=0, description="m/s, optional")
@@ -56,6 +64,10 @@ class CartesianLimit(StrictModel):
             raise ValueError("give `min`, `max` or both")
         if self.min is not None and self.max is not None and self.min >= self.max:
             raise FieldError("min", f"min ({self.min}) must be smaller than max ({self.max})")
+        if (self.axis is None) == (self.normal is None):
+            raise ValueError("give either `axis` (x, y or z) or `normal` (3 values)")
+        if self.normal is not None and not sum(v * v for v in self.normal) > 1e-12:
+            raise FieldError("normal", f"the normal must not be zero, got {self.normal}")
         return self
 
 

@@ -72,7 +72,10 @@ class TaskSpec(StrictModel):
     name: str = Field(pattern=r"^[A-Za-z_][A-Za-z0-9_]*$", description="identifier (letters, digits, _)")
     type: TaskType
     frame: str | None = Field(None, description="frame of a Cartesian task")
-    axes: list[Axis] | None = Field(None, description="controlled axes; their number is the task dimension")
+    axes: list[Axis] | None = Field(None, description=(
+        "controlled axes; their number is the task dimension. x, y, z: world axes; rx, ry, rz: all three are the "
+        "world rotation, one or two are the frame's own axes ([rx, ry]: point the frame's z, its spin free; "
+        "[rz]: only the spin about the frame's z); see docs/tasks.md"))
     joints: list[str] | None = Field(None, description="joints of a joint task (default: all)")
     priority: Integer = Field(ge=1, description="1 is the highest; tasks may share a level")
     gains: Gains

@@ -1,4 +1,4 @@
-"""Rotations in CasADi: rpy to matrix, and the SO(3) logarithm used for orientation errors."""
+"""Rotations in CasADi: rpy to matrix, the SO(3) logarithm, and the errors of orientation tasks."""
 
 from __future__ import annotations
 
@@ -49,3 +49,47 @@ def log3(R: ca.SX) -> ca.SX:
         ca.logic_and(d0 >= d1, d0 >= d2), candidates[0], ca.if_else(d1 >= d2, candidates[1], candidates[2])
     )
     return ca.if_else(theta > 3.0, near_pi, regular)
+
+
+OWN_AXIS = {"rx": 0, "ry": 1, "rz": 2}
+SMALL_ANGLE = 1e-4  # below: θ/sin θ by its Taylor series
+ANTIPODAL = 1e-9  # |a × a_d| below this with a·a_d < 0: the swing axis is undefined
+
+
+def orientation_rows(rotation: ca.SX, axes: tuple[str, ...]) -> ca.SX:
+    """The world directions (3 × m) whose angular velocity components a task on `axes` controls:
+    the world axes for all three, else the frame's own selected axes (columns of R)."""
+    if len(axes) == 3:
+        return ca.SX.eye(3)[:, [OWN_AXIS[a] for a in axes]]
+    return ca.horzcat(*[rotation[:, OWN_AXIS[a]] for a in axes])
+
+
+def orientation_error(rotation: ca.SX, target: ca.SX, axes: tuple[str, ...]) -> ca.SX:
+    """The error of an orientation task on `axes`, along `orientation_rows` (m values).
+
+    All three axes: log(R_d Rᵀ), the world rotation vector. Two of the frame's own axes (the third
+    free): the *swing* that turns the free axis a = R e_k onto the target's a_d = R_d e_k, i.e.
+    θ u with u ∥ a × a_d and θ = ∠(a, a_d), in components along the two controlled axes; a rotation
+    about the free axis does not change it. One own axis k (the others free): the *twist* about
+    it, ψ = 2 atan2(q_k, q_w) for the quaternion q of Rᵀ R_d (the swing–twist split), in (−π, π].
+    """
+    if len(axes) == 3:
+        return log3(ca.mtimes(target, rotation.T))[[OWN_AXIS[a] for a in axes]]
+    if len(axes) == 2:
+        (free,) = set(OWN_AXIS) - set(axes)
+        k = OWN_AXIS[free]
+        a, a_d = rotation[:, k], target[:, k]
+        c = ca.cross(a, a_d)  # sin θ · u
+        sin_theta, cos_theta = ca.norm_2(c), ca.dot(a, a_d)
+        theta = ca.atan2(sin_theta, cos_theta)
+        small = theta < SMALL_ANGLE
+        swing = ca.if_else(small, 1.0 + theta**2 / 6.0, theta / ca.if_else(small, 1.0, sin_theta)) * c
+        # turned half a turn away: any axis normal to a is a shortest swing; take the first controlled one
+        swing = ca.if_else(ca.logic_and(sin_theta < ANTIPODAL, cos_theta < 0), theta * rotation[:, OWN_AXIS[axes[0]]], swing)
+        return ca.mtimes(orientation_rows(rotation, axes).T, swing)
+    k = OWN_AXIS[axes[0]]
+    i, j = (k + 1) % 3, (k + 2) % 3
+    relative = ca.mtimes(rotation.T, target)
+    # 4 q_w q_k = R_ji − R_ij and 4 q_w² = 1 + tr R: their ratio is tan(ψ/2), whatever q's sign
+    # (1 + tr R ≥ 0, so the angle is in [−π/2, π/2] and ψ in [−π, π])
+    return 2.0 * ca.atan2(relative[j, i] - relative[i, j], 1.0 + relative[0, 0] + relative[1, 1] + relative[2, 2])
