@@ -12,6 +12,7 @@ from reference import dynamics
 
 from dcts_spec.analysis.compare import markdown_table, table_rows
 from dcts_spec.analysis.metrics import SUMMARY_KEYS, json_ready, summarize
+from dcts_spec.files import OWNED, OutputFolderError
 from dcts_spec.analysis.outputs import atomic_directory
 from dcts_spec.analysis.run import RunResult
 from dcts_spec.analysis.series import TimeSeries, _kinetic_energies, evaluate
@@ -153,7 +154,7 @@ def test_json_ready_and_tables(case) -> None:
     assert "| min_scaling | 0.25 | – |" in table
 
 
-def test_atomic_directory_replaces_on_success_and_keeps_the_old_on_failure(tmp_path: Path) -> None:
+def test_atomic_directory_replaces_its_own_files_and_keeps_the_users(tmp_path: Path) -> None:
     out = tmp_path / "out"
     with atomic_directory(out) as staging:
         (staging / "a.txt").write_text("first")
@@ -164,14 +165,24 @@ def test_atomic_directory_replaces_on_success_and_keeps_the_old_on_failure(tmp_p
             (staging / "a.txt").write_text("second")
             raise RuntimeError("boom")
     assert (out / "a.txt").read_text() == "first"
+    (out / "notes.txt").write_text("mine")  # the user's
+    (out / "mine").mkdir()
     with atomic_directory(out) as staging:
         (staging / "b.txt").write_text("third")
-    assert [p.name for p in out.iterdir()] == ["b.txt"]
+    assert sorted(p.name for p in out.iterdir()) == [OWNED, "b.txt", "mine", "notes.txt"]  # a.txt was dcts'
+    assert (out / "notes.txt").read_text() == "mine"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]
     (tmp_path / "file").write_text("")
-    with pytest.raises(FileExistsError):
+    with pytest.raises(OutputFolderError):
         with atomic_directory(tmp_path / "file"):
             pass
+    users = tmp_path / "users"
+    users.mkdir()
+    (users / "important.txt").write_text("keep")
+    with pytest.raises(OutputFolderError, match="not written by dcts"):
+        with atomic_directory(users):
+            pass
+    assert [p.name for p in users.iterdir()] == ["important.txt"]
 
 
 def test_empty_log_has_a_summary(case) -> None:

@@ -329,6 +329,16 @@ def test_invalid_output_paths(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["file.txt", "home"]
 
 
+def test_compiling_again_keeps_the_files_a_user_added_to_the_bundle(tmp_path):
+    out = tmp_path / "bundle"
+    compile_bundle(MINIMAL, out, build=False)
+    (out / "my_main.c").write_text("int main(void) { return 0; }\n")
+    (out / "minimal.h").write_text("stale")
+    compile_bundle(MINIMAL, out, build=False)
+    assert (out / "my_main.c").read_text().startswith("int main")
+    assert "stale" not in (out / "minimal.h").read_text()  # dcts' own file is replaced
+
+
 def test_cli_compile(tmp_path):
     runner = CliRunner()
     out = tmp_path / "cli"

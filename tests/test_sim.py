@@ -19,6 +19,7 @@ from dcts_spec.cli import app
 from dcts_spec.codegen import model_digest
 from dcts_spec.codegen.bundle import spec_digest
 from dcts_spec.controller import StepResult
+from dcts_spec.files import OWNED
 from dcts_spec.sim.commands import RunOptions, simulate_command
 from dcts_spec.sim.mismatch import scaled_robot
 from dcts_spec.sim.mujoco_model import mass_matrix
@@ -312,6 +313,22 @@ def test_no_cache_option_builds_in_a_temporary_directory(tmp_path: Path, monkeyp
 # -- the command line ---------------------------------------------------------------------------
 
 
+def test_simulate_never_deletes_a_users_file(tmp_path: Path) -> None:
+    spec = tmp_path / "push.yaml"
+    spec.write_text(spec_text(PUSH))
+    users = tmp_path / "mine"
+    (users / "sub").mkdir(parents=True)
+    (users / "important.txt").write_text("keep")
+    result = dcts("simulate", str(spec), "--runtime", "python", "--out", str(users), "--duration", "0.05", "--no-plots")
+    assert result.returncode == 1 and "refusing" in result.stderr and "Traceback" not in result.stderr
+    assert sorted(p.name for p in users.iterdir()) == ["important.txt", "sub"]
+    out = tmp_path / "out"
+    for _ in range(2):  # a note added to a run folder survives the next run into it
+        assert simulate_command(spec, out, RunOptions(runtime="python", quiet=True, duration=0.05), plots=False) == 0
+        (out / "notes.txt").write_text("my notes")
+    assert (out / "notes.txt").read_text() == "my notes" and (out / "summary.json").is_file()
+
+
 def test_simulate_writes_a_complete_output_directory(tmp_path: Path) -> None:
     spec = tmp_path / "push.yaml"
     spec.write_text(spec_text(PUSH))
@@ -342,6 +359,7 @@ def test_failed_run_leaves_no_output_directory(tmp_path: Path, monkeypatch: pyte
     out = tmp_path / "out"
     out.mkdir()
     (out / "old.txt").write_text("previous run")
+    (out / OWNED).write_text('["old.txt"]')  # a previous dcts run
 
     def broken(*args, **kwargs):
         raise OSError("disk full")
@@ -349,7 +367,7 @@ def test_failed_run_leaves_no_output_directory(tmp_path: Path, monkeypatch: pyte
     monkeypatch.setattr("dcts_spec.analysis.outputs.write_plots", broken)
     with pytest.raises(OSError):
         simulate_command(spec, out, RunOptions(runtime="python", quiet=True))
-    assert [p.name for p in out.iterdir()] == ["old.txt"]  # the previous output is untouched
+    assert sorted(p.name for p in out.iterdir()) == [OWNED, "old.txt"]  # the previous output is untouched
     assert sorted(p.name for p in tmp_path.iterdir()) == ["out", "push.yaml"]
 
 

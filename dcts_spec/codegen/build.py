@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
 
+from ..files import OutputFolderError, check_writable, install
 from ..controller import Controller
 from ..robot.model import Robot
 from ..spec import Spec, load_spec
@@ -97,10 +98,10 @@ def _is_bundle(directory: Path) -> bool:
 
 
 def _check_output(out_dir: Path) -> None:
-    if out_dir.exists() and not out_dir.is_dir():
-        raise CodegenError(f"output path {out_dir} exists and is not a directory")
-    if out_dir.is_dir() and any(out_dir.iterdir()) and not _is_bundle(out_dir):
-        raise CodegenError(f"output directory {out_dir} is not empty and holds no dcts bundle: refusing to replace it")
+    try:  # (a bundle from before the OWNED file is known by its manifest)
+        check_writable(out_dir, allow_unmarked=_is_bundle)
+    except OutputFolderError as error:
+        raise CodegenError(str(error)) from None
 
 
 def _make_parents(directory: Path) -> list[Path]:
@@ -127,25 +128,6 @@ def _remove_created(created: list[Path]) -> None:
             parent.rmdir()
         except OSError:
             pass
-
-
-def _install(tmp: Path, out_dir: Path) -> None:
-    """Rename the finished temporary directory into place (replacing an older bundle)."""
-    old = None
-    if out_dir.exists():
-        if any(out_dir.iterdir()):
-            old = out_dir.with_name(f".{out_dir.name}.old-{os.getpid()}")
-            os.rename(out_dir, old)
-        else:
-            out_dir.rmdir()
-    try:
-        os.rename(tmp, out_dir)
-    except OSError:
-        if old is not None:
-            os.rename(old, out_dir)
-        raise
-    if old is not None:
-        shutil.rmtree(old, ignore_errors=True)
 
 
 # -- compile ---------------------------------------------------------------------------------------
@@ -433,7 +415,7 @@ def compile_bundle(
         if target == "cortex-m7":
             report.firmware = manifest["cortex_m7"] = build_firmware(tmp, manifest, qemu=qemu)
         (tmp / "manifest.json").write_text(json.dumps(manifest, indent=2) + "\n")
-        _install(tmp, out_dir)
+        install(tmp, out_dir)  # (files a user added to an older bundle stay)
     except BaseException as exc:
         shutil.rmtree(tmp, ignore_errors=True)
         _remove_created(created)

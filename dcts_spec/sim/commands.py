@@ -17,6 +17,7 @@ import typer
 
 from ..analysis.compare import markdown_table, write_comparison
 from ..analysis.outputs import atomic_directory, write_run
+from ..files import OutputFolderError, check_writable
 from ..analysis.run import RunResult, analyze
 from ..formulations import FORMULATIONS
 from ..spec import Spec, SpecError, load_spec
@@ -58,7 +59,7 @@ def _guarded(command: Callable[[], None]) -> int:
     except SpecError as error:
         typer.echo(str(error), err=True)
         return 1
-    except (CommandError, RuntimeUnavailable, VideoUnavailable) as error:
+    except (CommandError, RuntimeUnavailable, VideoUnavailable, OutputFolderError) as error:
         typer.echo(f"error: {error}", err=True)
         return 1
     return 0
@@ -131,8 +132,10 @@ def _load(file: Path, options: RunOptions, formulations: list[str]) -> Spec:
 def _output_directory(out: Path | None, default: Path) -> Path:
     """The output directory, checked before a run rather than after it."""
     out = out or default
-    if out.exists() and not out.is_dir():
-        raise CommandError(f"--out {out} exists and is not a directory")
+    try:
+        check_writable(out)
+    except OutputFolderError as error:
+        raise CommandError(f"--out {error}") from None
     return out
 
 

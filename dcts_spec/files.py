@@ -1,0 +1,67 @@
+"""Output folders that never lose a user's file.
+
+A command builds its output in a staging folder, then `install` moves it into place: entries the
+new output has replace their namesakes, entries the previous dcts output had (listed in its
+OWNED file) and the new one lacks go, and everything else in the folder (a user's notes, their
+main.c) stays. A folder that exists, is not empty and has no OWNED file was not made by dcts:
+`check_writable` refuses it before any work is done.
+"""
+
+from __future__ import annotations
+
+import json
+import secrets
+import shutil
+from pathlib import Path
+
+OWNED = ".dcts-owned"  # JSON list of the top-level names dcts wrote
+
+
+class OutputFolderError(Exception):
+    """The output folder cannot be written without touching files dcts did not write."""
+
+
+def owned_names(folder: Path) -> set[str]:
+    try:
+        return set(json.loads((folder / OWNED).read_text()))
+    except (OSError, ValueError):
+        return set()
+
+
+def check_writable(folder: Path, allow_unmarked=lambda folder: False) -> None:
+    """Raise OutputFolderError unless `folder` is absent, empty, or written by dcts before
+    (`allow_unmarked`: other evidence of that, e.g. a bundle's manifest from before OWNED)."""
+    folder = Path(folder)
+    if folder.exists() and not folder.is_dir():
+        raise OutputFolderError(f"{folder} exists and is not a directory")
+    if folder.is_dir() and any(folder.iterdir()) and not (folder / OWNED).is_file() and not allow_unmarked(folder):
+        raise OutputFolderError(f"{folder} is not empty and was not written by dcts (it has no {OWNED}): refusing "
+                                "to write into it; choose another output folder (dcts never deletes files it did not write)")
+
+
+def install(staging: Path, folder: Path) -> None:
+    """Move the finished `staging` folder's entries into `folder` (see the module docstring)."""
+    staging, folder = Path(staging), Path(folder)
+    new = sorted(p.name for p in staging.iterdir() if p.name != OWNED)
+    (staging / OWNED).write_text(json.dumps(new) + "\n")
+    if not folder.exists():
+        staging.rename(folder)
+        return
+    old = owned_names(folder)
+    trash = folder.parent / f".{folder.name}.{secrets.token_hex(6)}.old"
+    trash.mkdir()
+    moved: list[str] = []
+    try:
+        for name in sorted((old | set(new) | {OWNED}) & {p.name for p in folder.iterdir()}):
+            (folder / name).rename(trash / name)
+            moved.append(name)
+        for name in [*new, OWNED]:
+            (staging / name).rename(folder / name)
+    except OSError:
+        for name in moved:  # put the previous output back
+            if not (folder / name).exists():
+                (trash / name).rename(folder / name)
+        raise
+    finally:
+        shutil.rmtree(trash, ignore_errors=True)
+    staging.rmdir()
