@@ -362,3 +362,19 @@ def test_relaxation_stays_on_the_infeasible_joint(direction):
     others = np.arange(6)
     tol = 1e-6 * np.maximum(1.0, np.abs(hi[others]))
     assert np.all(a[others] <= hi[others] + tol) and np.all(a[others] >= lo[others] - tol), (a, lo, hi)
+
+
+def test_a_solver_answer_that_crosses_a_row_is_not_taken():
+    """`dcts bench` on specs/bench_iiwa14.yaml, closed-loop state 9321: the bend stage's QP (Hessian
+    I + I/ρ, condition 1e5) came back "optimal" from DAQP with joint 4's torque at 100.054 Nm, and
+    the step fell back to the safe torque. Every answer is now checked on its rows first."""
+    c = dcts_spec.build_controller(Path(__file__).resolve().parents[1] / "specs" / "bench_iiwa14.yaml")
+    q = [-0.12212700644079282, 0.27735083120337506, 2.1338049379945363, -0.574519547377791,
+         -1.5701717334190926, -2.0064726528057406, -1.3134182856492462]
+    dq = [-1.7453292519943295, 0.6816185634700215, 1.7453292519943295, -1.725814897099081,
+          0.5286804132471405, -0.11412180529129765, 3.141592653589793]
+    r = c.step(np.array(q), np.array(dq), np.zeros(7))
+    assert r.status == 0, r
+    data = c.evaluate_data(q, dq, np.zeros(7))
+    tau = data["tau0"].ravel() + data["T"] @ r.x  # before the runtime's clipping
+    assert np.all(np.abs(tau) <= c.tau_max * (1 + 1e-6)), tau

@@ -53,6 +53,10 @@ RELAX_MARGIN = 1e-7  # relative: a relaxed bound is widened this much beyond wha
 EXTRAPOLATION_MARGIN = 1e-9
 PROXIMAL_ITERATIONS = 30
 PROXIMAL_TOLERANCE = 1e-10
+# Every QP's answer is checked on its own rows (relative to max(1, |bound|)): DAQP's "optimal" flag
+# is not evidence. A bend stage's Hessian I + I/ρ (condition 1e5) once came back "optimal" with a
+# torque row crossed by 0.054 Nm; such an answer counts as a failed solve.
+FEASIBILITY_TOLERANCE = 1e-7
 # A joint or Cartesian acceleration bound holds if it is crossed by at most this much, relative
 # to max(1, |bound|) (rad/s² or m/s²): over a 1 ms period ~5e-13 m or rad of position.
 BOUND_TOLERANCE = 1e-6
@@ -95,8 +99,14 @@ class Cascade:
         self.nominal = nominal
 
     def _solve(self, H, f, lbx, ubx) -> np.ndarray | None:
-        x, _ = daqp_qp(H, f, self.A, np.concatenate([lbx, self.lba]), np.concatenate([ubx, self.uba]))
-        return x
+        lower, upper = np.concatenate([lbx, self.lba]), np.concatenate([ubx, self.uba])
+        x, _ = daqp_qp(H, f, self.A, lower, upper)
+        if x is None:
+            return None
+        value = np.concatenate([x, self.A @ x])
+        with np.errstate(invalid="ignore"):
+            excess = np.maximum(lower - value, value - upper) / np.maximum(1.0, np.minimum(np.abs(lower), np.abs(upper)))
+        return x if not np.any(excess > FEASIBILITY_TOLERANCE) else None
 
     def final(self, upto: int, lbx, ubx) -> np.ndarray | None:
         """½xᵀHx + fᵀx with the levels [0, upto) as they are in lbx/ubx and the others nominal."""
