@@ -65,9 +65,9 @@ def _errors(robot: str, axes: tuple[str, ...], free_angle_deg: float, seconds: f
 
 
 @pytest.mark.parametrize(("robot", "axes", "free_angles"), [
-    ("iiwa14", ("rx", "ry"), (0.0, -179.9)),
+    ("iiwa14", ("rx", "ry"), (-179.9,)),
     ("panda", ("ry", "rz"), (179.9,)),
-    ("panda", ("rz",), (0.0, 179.9)),
+    ("panda", ("rz",), (179.9,)),
 ])
 def test_subset_settles_whatever_the_free_offset(robot, axes, free_angles):
     runs = {angle: _errors(robot, axes, angle) for angle in free_angles}
