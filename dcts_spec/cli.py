@@ -23,6 +23,32 @@ app = typer.Typer(
 )
 
 
+def _print_version(value: bool) -> None:
+    """`--version`: dcts and the libraries whose versions decide its numbers (for bug reports)."""
+    if not value:
+        return
+    from importlib.metadata import PackageNotFoundError, version
+
+    def of(package: str) -> str:
+        try:
+            return version(package)
+        except PackageNotFoundError:
+            return "not installed"
+
+    libraries = ", ".join(f"{name} {of(package)}" for name, package in
+                          (("casadi", "casadi"), ("daqp", "daqp"), ("pinocchio", "pin"), ("mujoco", "mujoco")))
+    typer.echo(f"dcts {of('dcts-spec')} ({libraries})")
+    raise typer.Exit()
+
+
+@app.callback()
+def _root(
+    version: Annotated[bool, typer.Option("--version", callback=_print_version, is_eager=True,
+                                          help="print the versions of dcts and its solvers, and exit")] = False,
+) -> None:
+    """Prioritized torque control of redundant arms from one YAML spec."""
+
+
 @contextmanager
 def _exit_1_on_errors() -> Iterator[None]:
     """A broken spec or a bundle that cannot be generated or built: one message, exit code 1."""

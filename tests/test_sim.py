@@ -461,3 +461,11 @@ def test_compare_writes_tables_and_overlays(tmp_path: Path) -> None:
                  "compare_end_effector_path"):
         assert (out / f"{name}.png").is_file()
     assert (out / "dcts" / "log.npz").is_file() and (out / "osc" / "summary.json").is_file()
+
+
+def test_version_names_dcts_and_its_solvers() -> None:
+    from importlib.metadata import version
+
+    result = CliRunner().invoke(app, ["--version"])
+    assert result.exit_code == 0, result.output
+    assert result.output.startswith(f"dcts {version('dcts-spec')} (casadi {version('casadi')}, daqp {version('daqp')}, ")
