@@ -192,3 +192,15 @@ def test_empty_log_has_a_summary(case) -> None:
     assert isinstance(series, TimeSeries)
     summary = summarize(log, series, robot, [1, 2, 3])
     assert summary["steps"] == 0 and summary["min_scaling"] == 1.0
+
+
+def test_a_run_folder_from_before_the_owned_list_is_still_written(tmp_path: Path) -> None:
+    """runs/minimal from an older dcts (summary.json, no .dcts-owned): the README's first command
+    must still run into it; a user's file there stays."""
+    out = tmp_path / "run"
+    out.mkdir()
+    (out / "summary.json").write_text("{}")
+    (out / "mine.txt").write_text("keep")
+    with atomic_directory(out) as staging:
+        (staging / "summary.json").write_text('{"new": 1}')
+    assert (out / "summary.json").read_text() == '{"new": 1}' and (out / "mine.txt").read_text() == "keep"

@@ -13,13 +13,18 @@ from .plots import write_plots
 from .run import RunResult
 
 
+def earlier_output(folder: Path) -> bool:
+    """A run or comparison folder written by a dcts from before the OWNED file."""
+    return (folder / "summary.json").is_file() or (folder / "comparison.json").is_file()
+
+
 @contextmanager
 def atomic_directory(path: Path) -> Iterator[Path]:
     """Yield an empty staging folder whose entries go into `path` when the block succeeds
     (`files.install`: a user's own files in `path` stay). On an exception nothing is left behind
     and `path` is untouched. Raises OutputFolderError at once if `path` was not written by dcts."""
     path = Path(path)
-    check_writable(path)
+    check_writable(path, allow_unmarked=earlier_output)
     path.parent.mkdir(parents=True, exist_ok=True)
     # mkdir, not mkdtemp: the folder gets the user's usual permissions.
     staging = path.parent / f".{path.name}.{secrets.token_hex(6)}.partial"

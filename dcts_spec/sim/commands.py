@@ -16,7 +16,7 @@ from pathlib import Path
 import typer
 
 from ..analysis.compare import markdown_table, write_comparison
-from ..analysis.outputs import atomic_directory, write_run
+from ..analysis.outputs import atomic_directory, earlier_output, write_run
 from ..files import OutputFolderError, check_writable
 from ..analysis.run import RunResult, analyze
 from ..formulations import FORMULATIONS
@@ -133,7 +133,7 @@ def _output_directory(out: Path | None, default: Path) -> Path:
     """The output directory, checked before a run rather than after it."""
     out = out or default
     try:
-        check_writable(out)
+        check_writable(out, allow_unmarked=earlier_output)
     except OutputFolderError as error:
         raise CommandError(f"--out {error}") from None
     return out
