@@ -152,34 +152,36 @@ def _check_cartesian_bounds(spec: Spec, robot: Robot, q0: np.ndarray) -> list[Di
     diags: list[Diagnostic] = []
     data = robot.model.createData()
     pin.framesForwardKinematics(robot.model, data, q0)
+    targets = _position_targets(spec)
     for i, b in enumerate(robot.cartesian_bounds):
         c = float(b.coordinate(data.oMf[robot.model.getFrameId(b.frame)].translation))
         text = _bound_text(b)
         if not b.c_min - 1e-9 <= c <= b.c_max + 1e-9:
             diags.append(spec.source.diagnostic(("limits", "cartesian", i),
                                                 f"{b.frame}.{b.label} starts at {c:.4g} m, outside its bound {text}"))
-        for k, t in enumerate(spec.tasks):
-            reference = t.reference
-            if t.frame != b.frame or reference is None or reference.position is None or t.type not in ("position", "pose"):
-                continue
-            target = float(b.coordinate(np.asarray(reference.position, dtype=float)))
-            if not b.c_min <= target <= b.c_max:
+        for frame, at, what, position in targets:
+            target = float(b.coordinate(position))
+            if frame == b.frame and not b.c_min <= target <= b.c_max:
                 diags.append(spec.source.diagnostic(
-                    ("tasks", k, "reference", "position"),
-                    f"the target puts {b.frame}.{b.label} at {target:.4g} m, outside its bound {text} "
-                    f"(limits.cartesian[{i}]): the task will stop at the bound", "warning"))
-        waypoints = spec.scenario.waypoints if spec.scenario is not None else None
-        task = next((t for t in spec.tasks if waypoints is not None and t.name == waypoints.task), None)
-        if task is None or task.frame != b.frame or task.type not in ("position", "pose"):
-            continue
-        for k, point in enumerate(waypoints.points):  # (their position first, as in the reference layout)
-            target = float(b.coordinate(np.asarray(point[:3], dtype=float)))
-            if not b.c_min <= target <= b.c_max:
-                diags.append(spec.source.diagnostic(
-                    ("scenario", "waypoints", "points", k),
-                    f"this waypoint puts {b.frame}.{b.label} at {target:.4g} m, outside its bound {text} "
-                    f"(limits.cartesian[{i}]): the task will stop at the bound", "warning"))
+                    at, f"{what} puts {b.frame}.{b.label} at {target:.4g} m, outside its bound {text} "
+                        f"(limits.cartesian[{i}]): the task will stop at the bound", "warning"))
     return diags
+
+
+def _position_targets(spec: Spec) -> list[tuple[str, tuple, str, np.ndarray]]:
+    """(frame, key path, wording, position) of every constant position target: the references
+    of position and pose tasks, and the waypoints of such a task (their position comes first)."""
+    out = []
+    for k, t in enumerate(spec.tasks):
+        if t.type not in ("position", "pose"):
+            continue
+        if t.reference is not None and t.reference.position is not None:
+            out.append((t.frame, ("tasks", k, "reference", "position"), "the target", np.asarray(t.reference.position, dtype=float)))
+        waypoints = spec.scenario.waypoints if spec.scenario is not None else None
+        if waypoints is not None and waypoints.task == t.name:
+            out += [(t.frame, ("scenario", "waypoints", "points", j), "this waypoint", np.asarray(p[:3], dtype=float))
+                    for j, p in enumerate(waypoints.points)]
+    return out
 
 
 def _bound_text(b) -> str:
