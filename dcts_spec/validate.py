@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
+from .limits.naming import bound_text
 from .robot.model import Robot
 from .robot.resolve import resolve_robot
 from .spec import Diagnostic, Spec, SpecError, load_spec
@@ -155,7 +156,7 @@ def _check_cartesian_bounds(spec: Spec, robot: Robot, q0: np.ndarray) -> list[Di
     targets = _position_targets(spec)
     for i, b in enumerate(robot.cartesian_bounds):
         c = float(b.coordinate(data.oMf[robot.model.getFrameId(b.frame)].translation))
-        text = _bound_text(b)
+        text = bound_text(b)
         if not b.c_min - 1e-9 <= c <= b.c_max + 1e-9:
             diags.append(spec.source.diagnostic(("limits", "cartesian", i),
                                                 f"{b.frame}.{b.label} starts at {c:.4g} m, outside its bound {text}"))
@@ -182,12 +183,6 @@ def _position_targets(spec: Spec) -> list[tuple[str, tuple, str, np.ndarray]]:
             out += [(t.frame, ("scenario", "waypoints", "points", j), "this waypoint", np.asarray(p[:3], dtype=float))
                     for j, p in enumerate(waypoints.points)]
     return out
-
-
-def _bound_text(b) -> str:
-    lo = "" if not np.isfinite(b.c_min) else f"{b.c_min:.4g} m ≤ "
-    hi = "" if not np.isfinite(b.c_max) else f" ≤ {b.c_max:.4g} m"
-    return f"{lo}{b.frame}.{b.label}{hi}"
 
 
 def initial_configuration(spec: Spec, robot: Robot) -> np.ndarray:

@@ -1,0 +1,53 @@
+"""How a bound reads in messages and summaries: `0.3 m ≤ tool.z ≤ 0.8 m`, one format everywhere.
+
+`validate` words a Cartesian bound this way in its diagnostics, and the run summary names the
+bounds that gave way the same way (their row names, `joint:<joint>` and
+`cartesian:<frame>.<label>`, stay the keys of logs and summary.json).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..robot.model import CartesianBound, Robot
+
+
+def interval_text(name: str, lower: float, upper: float, unit: str) -> str:
+    """`lower unit ≤ name ≤ upper unit`, leaving out a side that is infinite."""
+    lo = f"{lower:.4g} {unit} ≤ " if np.isfinite(lower) else ""
+    hi = f" ≤ {upper:.4g} {unit}" if np.isfinite(upper) else ""
+    return f"{lo}{name}{hi}"
+
+
+def bound_text(b: CartesianBound) -> str:
+    """A Cartesian bound as an interval of the frame's coordinate, in m."""
+    return interval_text(f"{b.frame}.{b.label}", b.c_min, b.c_max, "m")
+
+
+def joint_bound_text(robot: Robot, j: int) -> str:
+    """Joint j's row: its position interval, then its speed limit (rad, or m for a prismatic joint)."""
+    name, lim = robot.joint_names[j], robot.limits
+    unit = joint_unit(robot, j)
+    parts = [interval_text(name, lim.q_min[j], lim.q_max[j], unit)]
+    if np.isfinite(lim.v_max[j]):
+        parts.append(f"|{name}'| ≤ {lim.v_max[j]:.4g} {unit}/s")
+    return ", ".join(parts)
+
+
+def joint_unit(robot: Robot, j: int) -> str:
+    """"m" for a prismatic joint, "rad" for a revolute one."""
+    kind = robot.model.joints[j + 1].shortname()  # joint 0 is the universe
+    return "m" if kind.startswith("JointModelP") else "rad"
+
+
+def row_text(robot: Robot, row_name: str) -> str:
+    """The bound behind a row name (`joint:<joint>`, `cartesian:<frame>.<label>`), as text;
+    the name itself for a row this robot does not have."""
+    kind, _, what = row_name.partition(":")
+    if kind == "joint" and what in robot.joint_names:
+        return joint_bound_text(robot, robot.joint_names.index(what))
+    if kind == "cartesian":
+        for b in robot.cartesian_bounds:
+            if f"{b.frame}.{b.label}" == what:
+                return bound_text(b)
+    return row_name
