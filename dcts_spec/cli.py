@@ -1,4 +1,9 @@
-"""The `dcts` command line: validate, schema, compile, bench, simulate, compare."""
+"""The `dcts` command line: validate, schema, compile, bench, simulate, compare.
+
+Conventions shared by every command (see EPILOG): `-o/--out` names what a command writes, with
+one default rule; flags take no value; bad option values are usage errors (exit 2), bad specs
+and inputs exit 1.
+"""
 
 from __future__ import annotations
 
@@ -7,20 +12,59 @@ import os
 import sys
 from collections.abc import Iterator
 from contextlib import contextmanager
+from functools import partial
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import Annotated, Literal, Optional
 
 import typer
+from typer.core import TyperCommand, TyperGroup
 
+from .codegen.build import TARGETS
+from .formulations import FORMULATIONS
+from .sim.runtime import RUNTIMES
 from .spec import SpecError
+
+EPILOG = ("Outputs: every command that writes a folder takes -o/--out DIR; without it, compile writes "
+          "build/<name>, simulate runs/<name> and compare runs/<name>-compare (<name>: the spec's `name`). "
+          "dcts writes only into a folder that is empty or that it wrote, and replaces only its own files. "
+          "Exit codes: 0 ok, 1 a bad spec or input (the message says where), 2 a usage error (unknown option, "
+          "bad option value), 3 an internal error (a bug: DCTS_DEBUG=1 shows the traceback).")
+INTERNAL_ERROR = 3
+
+
+class _FlagsTakeNoValue:
+    """Help without a `<bool>` type after flags (typer shows one for every bool option)."""
+
+    def get_params(self, ctx):  # type: ignore[no-untyped-def]
+        params = super().get_params(ctx)  # type: ignore[misc]
+        for param in params:
+            if getattr(param, "is_flag", False):
+                param.metavar = ""
+        return params
+
+
+class _Command(_FlagsTakeNoValue, TyperCommand):
+    pass
+
+
+class _Group(_FlagsTakeNoValue, TyperGroup):
+    pass
+
 
 app = typer.Typer(
     name="dcts",
+    cls=_Group,
     help="Prioritized torque control of redundant arms from one YAML spec.",
+    epilog=EPILOG,
     no_args_is_help=True,
-    add_completion=False,
     pretty_exceptions_enable=False,
 )
+command = partial(app.command, cls=_Command)
+
+# Choices, listed in the help and checked by the parser (a bad value is a usage error, exit 2).
+Formulation = Literal[tuple(FORMULATIONS)]  # type: ignore[valid-type]
+Runtime = Literal[RUNTIMES]  # type: ignore[valid-type]
+Target = Literal[TARGETS]  # type: ignore[valid-type]
 
 
 def _print_version(value: bool) -> None:
@@ -64,10 +108,47 @@ def _exit_1_on_errors() -> Iterator[None]:
         raise typer.Exit(1) from None
 
 
-@app.command()
+def _positive(value: Optional[float]) -> Optional[float]:
+    if value is not None and not value > 0:
+        raise typer.BadParameter(f"must be positive, got {value:g}")
+    return value
+
+
+def _formulation_list(value: str) -> list[str]:
+    """`--formulations a,b`: the names, each checked (a callback, so an error names the option)."""
+    names = [f.strip() for f in value.split(",") if f.strip()]
+    if not names:
+        raise typer.BadParameter("name at least one formulation")
+    unknown = [f for f in names if f not in FORMULATIONS]
+    if unknown:
+        raise typer.BadParameter(f"unknown formulation {unknown[0]!r}; choose from {', '.join(FORMULATIONS)}")
+    return names
+
+
+# Options shared by several commands: one spelling, one help text.
+_OUT_DEFAULTS = {"compile": "build/<name>", "simulate": "runs/<name>", "compare": "runs/<name>-compare"}
+
+
+def _out_help(command_name: str) -> str:
+    return f"output folder (default: {_OUT_DEFAULTS[command_name]}, <name> being the spec's `name`)"
+
+
+OldOutput = Annotated[Optional[Path], typer.Option("--output", hidden=True, help="old spelling of --out")]
+FormulationOption = Annotated[Optional[Formulation], typer.Option(help="override controller.formulation")]
+RuntimeOption = Annotated[Runtime, typer.Option(
+    help="controller in the loop: c (the generated C bundle) or python (CasADi from Python)")]
+DurationOption = Annotated[Optional[float], typer.Option(callback=_positive, help="override scenario.duration, in s")]
+CacheOption = Annotated[bool, typer.Option(
+    "--cache/--no-cache", help="c runtime: reuse the built bundle from the cache ($DCTS_CACHE_DIR or "
+    "~/.cache/dcts/bundles); --no-cache builds it afresh and leaves the cache alone")]
+JsonOption = Annotated[bool, typer.Option("--json", help="machine-readable output")]
+
+
+@command()
 def validate(
     files: Annotated[list[Path], typer.Argument(help="spec files")],
-    as_json: Annotated[bool, typer.Option("--json", help="machine-readable output")] = False,
+    as_json: Annotated[bool, typer.Option("--json", help="machine-readable output: a list, one report per file")]
+    = False,
     check: Annotated[bool, typer.Option("--check", help="also compile every formulation and report QP sizes")] = False,
 ) -> None:
     """Check spec files and summarize them; exit 1 if any has an error."""
@@ -93,46 +174,44 @@ def validate(
             for name, info in result.get("formulations", {}).items():
                 typer.echo(f"  {name:<11} {info['summary']}")
     if as_json:
-        typer.echo(json.dumps(results if len(results) > 1 else results[0], indent=2))
+        typer.echo(json.dumps(results, indent=2))
     raise typer.Exit(1 if failed else 0)
 
 
-@app.command()
+@command()
 def schema(
-    output: Annotated[Optional[Path], typer.Option("-o", "--output", help="write here instead of stdout")] = None,
+    out: Annotated[Optional[Path], typer.Option("--out", "-o", help="write the schema to this file instead of "
+                                                "printing it")] = None,
+    output: OldOutput = None,
 ) -> None:
     """Print (or write) the JSON Schema of the spec language."""
     from .spec.schema import spec_json_schema_text
 
     text = spec_json_schema_text()
-    if output is None:
+    out = out or output
+    if out is None:
         typer.echo(text, nl=False)
         return
     try:
-        output.write_text(text, encoding="utf-8")
+        out.write_text(text, encoding="utf-8")
     except OSError as error:
-        typer.echo(f"error: cannot write {output}: {error.strerror}", err=True)
+        typer.echo(f"error: cannot write {out}: {error.strerror}", err=True)
         raise typer.Exit(1) from None
-    typer.echo(f"wrote {output}")
+    typer.echo(f"wrote {out}")
 
 
-_RUNTIME_HELP = "controller in the loop: c (the generated C bundle) or python (CasADi from Python)"
-_CACHE_HELP = ("c runtime: reuse the built bundle from the cache ($DCTS_CACHE_DIR or ~/.cache/dcts/bundles); "
-               "--no-cache builds it afresh and leaves the cache alone")
-
-
-@app.command()
+@command()
 def simulate(
     file: Annotated[Path, typer.Argument(help="spec file with a `scenario` section")],
-    out: Annotated[Optional[Path], typer.Option("--out", "-o", help="output directory (default: runs/<name>)")] = None,
-    runtime: Annotated[str, typer.Option(help=_RUNTIME_HELP)] = "c",
-    formulation: Annotated[Optional[str], typer.Option(help="override controller.formulation")] = None,
-    duration: Annotated[Optional[float], typer.Option(help="override scenario.duration, in s")] = None,
+    out: Annotated[Optional[Path], typer.Option("--out", "-o", help=_out_help("simulate"))] = None,
+    runtime: RuntimeOption = "c",
+    formulation: FormulationOption = None,
+    duration: DurationOption = None,
     plots: Annotated[bool, typer.Option("--plots/--no-plots", help="write the PNG plots")] = True,
     viewer: Annotated[bool, typer.Option("--viewer", help="watch the run in MuJoCo's viewer (needs a display)")] = False,
     video: Annotated[Optional[Path], typer.Option(help="render the run offscreen to this MP4 file")] = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="no progress bar, no summary")] = False,
-    cache: Annotated[bool, typer.Option("--cache/--no-cache", help=_CACHE_HELP)] = True,
+    cache: CacheOption = True,
 ) -> None:
     """Run the compiled controller against MuJoCo through the spec's scenario; write log, summary, plots."""
     from .sim.display import choose_gl_backend
@@ -145,31 +224,35 @@ def simulate(
     raise typer.Exit(simulate_command(file, out, options, formulation, plots, viewer, video))
 
 
-@app.command()
+@command()
 def compare(
     file: Annotated[Path, typer.Argument(help="spec file with a `scenario` section")],
-    formulations: Annotated[str, typer.Option(help="comma-separated formulations to run")] = "dcts,osc,qp_md",
-    out: Annotated[Optional[Path], typer.Option("--out", "-o", help="output directory (default: runs/<name>-compare)")] = None,
-    runtime: Annotated[str, typer.Option(help=_RUNTIME_HELP)] = "c",
-    duration: Annotated[Optional[float], typer.Option(help="override scenario.duration, in s")] = None,
+    formulations: Annotated[str, typer.Option(
+        callback=_formulation_list, help=f"comma-separated formulations to run, from {', '.join(FORMULATIONS)}")] = "dcts,osc,qp_md",
+    out: Annotated[Optional[Path], typer.Option("--out", "-o", help=_out_help("compare"))] = None,
+    runtime: RuntimeOption = "c",
+    duration: DurationOption = None,
+    plots: Annotated[bool, typer.Option("--plots/--no-plots", help="write the overlay plots")] = True,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="no progress bar, no table")] = False,
-    cache: Annotated[bool, typer.Option("--cache/--no-cache", help=_CACHE_HELP)] = True,
+    cache: CacheOption = True,
 ) -> None:
     """Run the same scenario with several formulations; write a metrics table and overlay plots."""
     from .sim.commands import RunOptions, compare_command
 
-    names = [f.strip() for f in formulations.split(",") if f.strip()]
     options = RunOptions(runtime=runtime, duration=duration, quiet=quiet, cache=cache)
-    raise typer.Exit(compare_command(file, out, options, names))
+    names: list[str] = formulations  # type: ignore[assignment]  # (the callback split it)
+    raise typer.Exit(compare_command(file, out, options, names, plots))
 
 
-@app.command("compile")
+@command("compile")
 def compile_(
     file: Annotated[Path, typer.Argument(help="spec file")],
-    output: Annotated[Path, typer.Option("-o", "--output", help="bundle directory (written atomically)")],
-    formulation: Annotated[Optional[str], typer.Option(help="override controller.formulation")] = None,
+    out: Annotated[Optional[Path], typer.Option("--out", "-o", help=_out_help("compile"))] = None,
+    output: OldOutput = None,
+    formulation: FormulationOption = None,
     no_build: Annotated[bool, typer.Option("--no-build", help="write the sources only")] = False,
-    target: Annotated[str, typer.Option(help="host, or cortex-m7: also cross-compile and report flash/RAM")] = "host",
+    target: Annotated[Target, typer.Option(help="host, or cortex-m7: also cross-compile and report flash/RAM")]
+    = "host",
     daqp_src: Annotated[Optional[Path], typer.Option(help="DAQP C sources (csrc/) for the firmware; default: "
                                                      "PyPI's source distribution, cached")] = None,
     qemu: Annotated[bool, typer.Option("--qemu/--no-qemu", help="cortex-m7: run the golden test on qemu")] = True,
@@ -177,20 +260,23 @@ def compile_(
 ) -> None:
     """Generate the C bundle of a spec (QP data, DAQP solve, header, build files, golden test) and build it."""
     from .codegen import compile_bundle
+    from .spec import load_spec
 
     with _exit_1_on_errors():
-        report = compile_bundle(file, output, formulation=formulation, build=not no_build, target=target,
+        spec = load_spec(file)
+        directory = out or output or Path("build") / spec.name
+        report = compile_bundle(spec, directory, formulation=formulation, build=not no_build, target=target,
                                 daqp_src=daqp_src, qemu=qemu)
     typer.echo(json.dumps(report.manifest, indent=2) if as_json else "\n".join(report.lines()))
 
 
-@app.command()
+@command()
 def bench(
     file: Annotated[Path, typer.Argument(help="spec file")],
-    as_json: Annotated[bool, typer.Option("--json", help="machine-readable output")] = False,
-    formulation: Annotated[Optional[str], typer.Option(help="override controller.formulation")] = None,
-    states: Annotated[int, typer.Option(help="states timed in C (per state set)")] = 10000,
-    python_states: Annotated[int, typer.Option(help="states timed in the Python runtime")] = 500,
+    as_json: JsonOption = False,
+    formulation: FormulationOption = None,
+    states: Annotated[int, typer.Option(min=1, help="states timed in C (per state set)")] = 10000,
+    python_states: Annotated[int, typer.Option(min=1, help="states timed in the Python runtime")] = 500,
 ) -> None:
     """Time the generated C step (data and solve), the Python runtime and Pinocchio's dynamics terms."""
     from .codegen.bench import bench as run_bench
@@ -212,4 +298,4 @@ def main() -> None:
         if os.environ.get("DCTS_DEBUG"):
             raise
         typer.echo(f"error: {type(error).__name__}: {error} (set DCTS_DEBUG=1 to see the traceback)", err=True)
-        sys.exit(2)
+        sys.exit(INTERNAL_ERROR)

@@ -172,6 +172,6 @@ def test_cli_json_of_broken_file() -> None:
     result = dcts("validate", "--json", case.relative)
     assert result.returncode == 1
     assert "Traceback" not in result.stdout + result.stderr
-    report = json.loads(result.stdout)
+    [report] = json.loads(result.stdout)  # a list, even for one file
     assert report["valid"] is False
     assert any(d["line"] == case.line and d["severity"] == "error" for d in report["diagnostics"])

@@ -357,7 +357,7 @@ def test_cli_compile(tmp_path):
     assert result.exit_code == 1 and "Traceback" not in result.output
     assert not (tmp_path / "nope").exists()
     result = runner.invoke(app, ["compile", str(MINIMAL), "-o", str(tmp_path / "x"), "--formulation", "nope"])
-    assert result.exit_code == 1 and "unknown formulation" in result.output
+    assert result.exit_code == 2 and "'nope' is not one of" in result.output  # a usage error
 
 
 # -- model mismatch and the bundle cache -----------------------------------------------------------

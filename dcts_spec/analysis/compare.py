@@ -67,13 +67,16 @@ def _format(value: Any) -> str:
     return f"{value:.4g}"
 
 
-def write_comparison(runs: Sequence[RunResult], directory: Path, title: str) -> None:
-    """comparison.md/json, overlay plots, and each run's log and summary in a subdirectory."""
+def write_comparison(runs: Sequence[RunResult], directory: Path, title: str, plots: bool = True) -> None:
+    """comparison.md/json, overlay plots (unless `plots` is False), and each run's log and summary in a
+    subdirectory."""
     for run in runs:
         write_run(run, directory / run.label, plots=False)
     (directory / "comparison.md").write_text(f"# {title}\n\n{markdown_table(runs)}", encoding="utf-8")
     table = {run.label: run.summary for run in runs}
     (directory / "comparison.json").write_text(json.dumps(json_ready(table), indent=2) + "\n", encoding="utf-8")
+    if not plots:
+        return
     figures = {
         "compare_task_errors": task_error_overlay(runs),
         "compare_scalings": scaling_overlay(runs),

@@ -48,9 +48,10 @@ def simulate_command(file: Path, out: Path | None, options: RunOptions, formulat
     return _guarded(lambda: _simulate(file, out, options, formulation, plots, viewer, video))
 
 
-def compare_command(file: Path, out: Path | None, options: RunOptions, formulations: list[str]) -> int:
+def compare_command(file: Path, out: Path | None, options: RunOptions, formulations: list[str],
+                    plots: bool = True) -> int:
     """`dcts compare`: the same scenario with each formulation, a table and overlay plots in `out`."""
-    return _guarded(lambda: _compare(file, out, options, formulations))
+    return _guarded(lambda: _compare(file, out, options, formulations, plots))
 
 
 def _guarded(command: Callable[[], None]) -> int:
@@ -98,7 +99,7 @@ def _simulate(file: Path, out: Path | None, options: RunOptions, formulation: st
         typer.echo(f"wrote {out}/ (log.npz, summary.json{', plots' if plots else ''})")
 
 
-def _compare(file: Path, out: Path | None, options: RunOptions, formulations: list[str]) -> None:
+def _compare(file: Path, out: Path | None, options: RunOptions, formulations: list[str], plots: bool) -> None:
     if not formulations:
         raise CommandError("--formulations needs at least one formulation")
     spec = _load(file, options, formulations)
@@ -111,10 +112,12 @@ def _compare(file: Path, out: Path | None, options: RunOptions, formulations: li
             if not options.quiet:
                 typer.echo(describe(runs[-1]))
     with atomic_directory(out) as staging:
-        write_comparison(runs, staging, f"{spec.name}: {', '.join(formulations)} ({options.runtime} runtime)")
+        write_comparison(runs, staging, f"{spec.name}: {', '.join(formulations)} ({options.runtime} runtime)",
+                         plots=plots)
     if not options.quiet:
         typer.echo(markdown_table(runs), nl=False)
-        typer.echo(f"wrote {out}/ (comparison.md, comparison.json, overlay plots, one folder per formulation)")
+        typer.echo(f"wrote {out}/ (comparison.md, comparison.json{', overlay plots' if plots else ''}, "
+                   "one folder per formulation)")
 
 
 def _load(file: Path, options: RunOptions, formulations: list[str]) -> Spec:

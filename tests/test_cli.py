@@ -1,0 +1,185 @@
+"""The command line's conventions: one output option and default rule, choices in the help, no
+`<bool>` metavars, exit 2 for usage errors and 1 for bad specs, `--json` always a list."""
+
+from __future__ import annotations
+
+import json
+import re
+import shutil
+import subprocess
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from dcts_spec import cli
+from dcts_spec.cli import app
+from dcts_spec.formulations import FORMULATIONS
+
+ROOT = Path(__file__).resolve().parents[1]
+MINIMAL = ROOT / "specs" / "minimal.yaml"
+COMMANDS = ("validate", "schema", "simulate", "compare", "compile", "bench")
+WRITERS = ("schema", "simulate", "compare", "compile")
+
+runner = CliRunner()
+
+
+@pytest.fixture(autouse=True)
+def _private_bundle_cache(tmp_path_factory, monkeypatch):
+    """No test writes into the user's bundle cache."""
+    monkeypatch.setenv("DCTS_CACHE_DIR", str(tmp_path_factory.getbasetemp() / "bundle-cache"))
+
+
+def invoke(*args: str):
+    return runner.invoke(app, list(args), env={"COLUMNS": "200"})
+
+
+def short_spec(tmp_path: Path, name: str = "short") -> Path:
+    """minimal.yaml under another name with a 0.03 s scenario, in tmp_path."""
+    text = MINIMAL.read_text().replace("name: minimal", f"name: {name}").replace("duration: 2.0", "duration: 0.03")
+    path = tmp_path / f"{name}.yaml"
+    path.write_text(text)
+    return path
+
+
+@pytest.mark.parametrize("command", COMMANDS)
+def test_help_shows_no_bool_metavar(command: str) -> None:
+    result = invoke(command, "--help")
+    assert result.exit_code == 0, result.output
+    assert "<bool>" not in result.output
+
+
+def test_root_help_states_the_output_rule_and_exit_codes() -> None:
+    result = invoke("--help")
+    assert result.exit_code == 0 and "<bool>" not in result.output
+    text = " ".join(result.output.split())
+    for phrase in ("build/<name>", "runs/<name>", "runs/<name>-compare", "2 a usage error", "1 a bad spec"):
+        assert phrase in text
+
+
+@pytest.mark.parametrize("command", WRITERS)
+def test_every_writer_takes_out_and_o(command: str) -> None:
+    output = invoke(command, "--help").output
+    assert re.search(r"--out\s+-o", output), output
+    assert "--output" not in output  # the old spelling works but is not advertised
+
+
+@pytest.mark.parametrize("command", ("simulate", "compile", "bench"))
+def test_formulation_help_lists_the_choices(command: str) -> None:
+    output = invoke(command, "--help").output
+    assert "|".join(FORMULATIONS) in output
+
+
+def test_compare_help_lists_the_choices() -> None:
+    assert ", ".join(FORMULATIONS) in " ".join(invoke("compare", "--help").output.split())
+
+
+@pytest.mark.parametrize("args", [
+    ("simulate", str(MINIMAL), "--runtime", "fortran"),
+    ("simulate", str(MINIMAL), "--formulation", "nope"),
+    ("simulate", str(MINIMAL), "--duration", "-1"),
+    ("simulate", str(MINIMAL), "--duration", "0"),
+    ("simulate", str(MINIMAL), "--no-such-option"),
+    ("compare", str(MINIMAL), "--formulations", "dcts,nope"),
+    ("compare", str(MINIMAL), "--formulations", ","),
+    ("compare", str(MINIMAL), "--runtime", "fortran"),
+    ("compile", str(MINIMAL), "--target", "z80"),
+    ("compile", str(MINIMAL), "--formulation", "nope"),
+    ("bench", str(MINIMAL), "--states", "0"),
+    ("validate",),
+    ("nosuchcommand",),
+])
+def test_usage_errors_exit_2(args: tuple[str, ...], tmp_path: Path) -> None:
+    result = runner.invoke(app, [*args, "--out", str(tmp_path / "out")] if args[0] in ("simulate", "compare")
+                           else list(args))
+    assert result.exit_code == 2, result.output
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("command", ("validate", "compile", "simulate", "compare", "bench"))
+def test_bad_specs_exit_1(command: str, tmp_path: Path) -> None:
+    broken = tmp_path / "broken.yaml"
+    broken.write_text("version: 1\nname: broken\nrobot: {model: iiwa14}\ntasks: []\nbogus: 1\n")
+    args = [command, str(broken)] + (["--out", str(tmp_path / "out")] if command in WRITERS else [])
+    result = invoke(*args)
+    assert result.exit_code == 1, result.output
+    assert "broken.yaml:5" in result.output and "Traceback" not in result.output
+    assert not (tmp_path / "out").exists()
+
+
+def test_an_internal_error_exits_3_not_2(monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture) -> None:
+    def broken_app() -> None:
+        raise RuntimeError("a bug")
+
+    monkeypatch.setattr(cli, "app", broken_app)
+    monkeypatch.delenv("DCTS_DEBUG", raising=False)
+    with pytest.raises(SystemExit) as exited:
+        cli.main()
+    assert exited.value.code == 3
+    assert "RuntimeError: a bug" in capsys.readouterr().err
+
+
+def test_validate_json_is_a_list_for_one_file() -> None:
+    result = invoke("validate", "--json", str(MINIMAL))
+    assert result.exit_code == 0, result.output
+    reports = json.loads(result.stdout)
+    assert isinstance(reports, list) and [r["name"] for r in reports] == ["minimal"]
+
+
+def test_schema_out_and_its_old_spelling(tmp_path: Path) -> None:
+    for option in ("-o", "--out", "--output"):
+        path = tmp_path / f"schema{option}.json"
+        result = invoke("schema", option, str(path))
+        assert result.exit_code == 0, result.output
+        assert json.loads(path.read_text())["title"]
+
+
+def test_compile_defaults_to_build_name(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    spec = short_spec(tmp_path)
+    monkeypatch.chdir(tmp_path)
+    result = invoke("compile", str(spec), "--no-build")
+    assert result.exit_code == 0, result.output
+    assert (tmp_path / "build" / "short" / "short.h").is_file()
+    result = invoke("compile", str(spec), "--no-build", "--output", "old")  # the old spelling
+    assert result.exit_code == 0, result.output
+    assert (tmp_path / "old" / "short.h").is_file()
+
+
+def test_the_headers_regenerate_hint_is_a_command_that_works(tmp_path: Path) -> None:
+    spec = short_spec(tmp_path)
+    bundle = tmp_path / "bundle"
+    assert invoke("compile", str(spec), "--no-build", "--formulation", "osc", "-o", str(bundle)).exit_code == 0
+    header = (bundle / "short.h").read_text()
+    hint = re.search(r"regenerate with `dcts ([^`]*)`", header)
+    assert hint, header[:400]
+    args = hint.group(1).replace("<this folder>", str(bundle)).split()
+    assert args[:2] == ["compile", spec.name]
+    (bundle / "short.h").write_text("stale")
+    result = runner.invoke(app, [args[0], str(spec), *args[2:], "--no-build"])
+    assert result.exit_code == 0, result.output
+    assert (bundle / "short.h").read_text().startswith("/*")
+    assert json.loads((bundle / "manifest.json").read_text())["formulation"] == "osc"
+
+
+def test_simulate_and_compare_default_to_runs(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    spec = short_spec(tmp_path)
+    monkeypatch.chdir(tmp_path)
+    result = invoke("simulate", str(spec), "--runtime", "python", "--no-plots", "-q")
+    assert result.exit_code == 0, result.output
+    assert (tmp_path / "runs" / "short" / "summary.json").is_file()
+    result = invoke("compare", str(spec), "--runtime", "python", "--formulations", "dcts,osc", "--no-plots", "-q")
+    assert result.exit_code == 0, result.output
+    compared = tmp_path / "runs" / "short-compare"
+    assert (compared / "comparison.json").is_file() and (compared / "osc" / "summary.json").is_file()
+    assert not list(compared.glob("*.png"))  # --no-plots
+
+
+@pytest.mark.skipif(shutil.which("bash") is None, reason="no bash to load the completion script into")
+def test_shell_completion_is_offered() -> None:
+    result = invoke("--show-completion", "bash")
+    assert result.exit_code == 0, result.output
+    assert "_DCTS_COMPLETE" in result.output
+    script = subprocess.run(["bash", "-n"], input=result.output, capture_output=True, text=True)
+    assert script.returncode == 0, script.stderr
+    assert "--install-completion" in invoke("--help").output
+
