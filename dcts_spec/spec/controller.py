@@ -13,21 +13,36 @@ Solver = Literal["daqp"]
 
 
 class ControllerSpec(StrictModel):
-    formulation: Formulation = "dcts"
-    solver: Solver = Field("daqp", description="QP solver: DAQP in its hierarchical (lexicographic) mode, the same in Python and in the generated C")
-    period: Number = Field(0.001, gt=0, le=0.1, description="control period in s")
+    """How the torque is computed: the formulation, its solver and its settings."""
+
+    formulation: Formulation = Field("dcts", description=(
+        "how the priorities are enforced (docs/formulations.md): dcts (strict priorities, tasks scaled "
+        "under limits), osc (operational-space control), projector (null-space projectors), qp_mt and "
+        "qp_md (one weighted QP; minimum torque or joint damping as regularization)"),
+        examples=["dcts", "qp_md"])
+    solver: Solver = Field("daqp", description=(
+        "QP solver: DAQP, the same in Python and in the generated C (dcts solves a cascade of ordinary QPs)"),
+        examples=["daqp"])
+    period: Number = Field(0.001, gt=0, le=0.1, description="control period, s", examples=[0.001, 0.0005])
     external_torque: Literal["measured", "ignored"] = Field(
-        "measured", description="use the measured external joint torque in tasks and limits"
+        "measured", description="use the measured external joint torque (Nm) in tasks and limits, or ignore it",
+        examples=["measured", "ignored"],
     )
     priority_weights: NumberList | None = Field(
         None,
-        description="QP-MT and QP-MD only (soft priorities): weight of each priority level, highest first "
-        "(default 1e6·1e3^(k−i)); dcts solves its levels lexicographically and takes no weights"
+        description="QP-MT and QP-MD only (soft priorities): weight of each priority level, highest first, unitless; "
+        "default: 1e6 for the lowest level and 1e3 times more for each level above (three levels: [1e12, 1e9, 1e6]). "
+        "dcts solves its levels lexicographically and takes no weights",
+        examples=[[1e9, 1e6]],
     )
-    joint_damping: ScalarOrVector = Field(5.0, description="QP-MD's joint damping D in 1/s (q̈_d = −D q̇)")
+    joint_damping: ScalarOrVector = Field(
+        5.0, description="QP-MD's joint damping D in 1/s (q̈_d = −D q̇), one value or one per joint", examples=[5.0, 10])
     fallback_damping: ScalarOrVector = Field(
         10.0,
-        description="damping D of the safe fallback torque, in Nm·s/rad: each joint's velocity decays at the rate "
-        "min(D/M_jj(q), 0.5/period), stable at the control period whatever the joint's inertia",
+        description="damping D of the safe fallback torque, in Nm·s/rad, one value or one per joint: each joint's "
+        "velocity decays at the rate min(D/M_jj(q), 0.5/period), stable at the control period whatever the joint's inertia",
+        examples=[10.0, [20, 20, 10, 10, 5, 5, 2]],
     )
-    regularization_weight: Number = Field(1e-4, gt=0, description="weight w of QP-MT/QP-MD's regularization term")
+    regularization_weight: Number = Field(
+        1e-4, gt=0, description="weight w of QP-MT/QP-MD's regularization term, relative to the lowest level's, unitless",
+        examples=[1e-4])

@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Literal
 
-from pydantic import Field, PrivateAttr
+from pydantic import ConfigDict, Field, PrivateAttr
 
 from .controller import ControllerSpec
 from .limits import LimitsSpec
@@ -19,17 +19,38 @@ from .types import StrictModel
 class Spec(StrictModel):
     """A robot, its prioritized tasks and limits, the controller settings and a simulation scenario."""
 
-    version: Literal[1] = Field(description="spec language version")
+    model_config = ConfigDict(json_schema_extra={"examples": [{
+        "version": 1,
+        "name": "minimal",
+        "robot": {"model": "iiwa14"},
+        "limits": {"joint_torque": {"max": 100}},
+        "tasks": [
+            {"name": "tool_position", "type": "position", "frame": "tool", "priority": 1,
+             "gains": {"kp": 100, "kd": 20}, "reference": {"position": [0.5, 0.0, 0.6]}},
+            {"name": "damping", "type": "joint", "priority": 2, "gains": {"kp": 0, "kd": 5}},
+        ],
+        "scenario": {"duration": 2.0, "initial_q": [0, 30, 0, -60, 0, 60, 0], "unit": "deg"},
+    }]})
+
+    version: Literal[1] = Field(description="spec language version; 1 is the only one", examples=[1])
     name: str = Field(
         pattern=r"^[A-Za-z_][A-Za-z0-9_]*$",
         max_length=64,
-        description="identifier; prefixes the generated C symbols",
+        description="identifier (letters, digits, _; at most 64 characters); prefixes the generated C symbols "
+        "and names the output folders",
+        examples=["minimal", "pick_and_place"],
     )
-    robot: RobotSpec
-    limits: LimitsSpec = Field(default_factory=LimitsSpec)
-    controller: ControllerSpec = Field(default_factory=ControllerSpec)
-    tasks: list[TaskSpec] = Field(min_length=1)
-    scenario: ScenarioSpec | None = None
+    robot: RobotSpec = Field(description="the robot to control: a built-in model or a URDF",
+                             examples=[{"model": "iiwa14"}, {"urdf": "robots/my_arm.urdf"}])
+    limits: LimitsSpec = Field(default_factory=LimitsSpec, description=(
+        "joint and Cartesian bounds the controller keeps; joint bounds default to the URDF's"),
+        examples=[{"joint_torque": {"max": 100}}])
+    controller: ControllerSpec = Field(default_factory=ControllerSpec, description="formulation and its settings",
+                                       examples=[{"formulation": "dcts", "period": 0.001}])
+    tasks: list[TaskSpec] = Field(min_length=1, description="what the robot should do, by priority (at least one task)",
+                                  examples=[[{"name": "damping", "type": "joint", "priority": 1, "gains": {"kp": 0, "kd": 5}}]])
+    scenario: ScenarioSpec | None = Field(None, description="what `dcts simulate` runs; not needed to compile",
+                                          examples=[{"duration": 2.0}])
 
     _source: SourceMap = PrivateAttr(default_factory=lambda: SourceMap("<spec>"))
 

@@ -9,12 +9,20 @@ from pydantic import Field, model_validator
 from .types import FieldError, Number, ScalarOrVector, StrictModel
 from .units import AngleUnit, AngularAccelerationUnit, AngularVelocityUnit
 
+_ALLOW_OUTSIDE_URDF = "accept limits wider than the URDF's (with a warning) instead of refusing them"
+
 
 class JointPositionLimits(StrictModel):
-    min: ScalarOrVector | None = None
-    max: ScalarOrVector | None = None
-    unit: AngleUnit = "rad"
-    allow_outside_urdf: bool = Field(False, description="accept limits wider than the URDF's (with a warning)")
+    """Joint position bounds min ≤ q ≤ max, replacing the URDF's (narrower unless allowed)."""
+
+    min: ScalarOrVector | None = Field(None, description="lower bound in `unit` (rad or deg; m for a prismatic "
+                                       "joint), one value or one per joint; default: the URDF's",
+                                       examples=[-160, [-165, -115, -165, -115, -165, -115, -170]])
+    max: ScalarOrVector | None = Field(None, description="upper bound in `unit` (rad or deg; m for a prismatic "
+                                       "joint), one value or one per joint; default: the URDF's",
+                                       examples=[160, [165, 115, 165, 115, 165, 115, 170]])
+    unit: AngleUnit = Field("rad", description="unit of min and max", examples=["deg"])
+    allow_outside_urdf: bool = Field(False, description=_ALLOW_OUTSIDE_URDF, examples=[False])
 
     @model_validator(mode="after")
     def _some_bound(self) -> "JointPositionLimits":
@@ -24,20 +32,29 @@ class JointPositionLimits(StrictModel):
 
 
 class JointVelocityLimits(StrictModel):
-    max: ScalarOrVector
-    unit: AngularVelocityUnit = "rad/s"
-    allow_outside_urdf: bool = False
+    """Joint velocity bounds |q̇| ≤ max."""
+
+    max: ScalarOrVector = Field(description="in `unit` (rad/s or deg/s; m/s for a prismatic joint), one value or "
+                                "one per joint", examples=[1.5, [100, 110, 100, 130, 130, 180, 180]])
+    unit: AngularVelocityUnit = Field("rad/s", description="unit of max", examples=["deg/s"])
+    allow_outside_urdf: bool = Field(False, description=_ALLOW_OUTSIDE_URDF, examples=[False])
 
 
 class JointAccelerationLimits(StrictModel):
-    max: ScalarOrVector
-    unit: AngularAccelerationUnit = "rad/s^2"
+    """Joint acceleration bounds |q̈| ≤ max (the URDF has none)."""
+
+    max: ScalarOrVector = Field(description="in `unit` (rad/s² or deg/s²; m/s² for a prismatic joint), one value "
+                                "or one per joint", examples=[20, [500, 500, 600, 600, 800, 800, 1000]])
+    unit: AngularAccelerationUnit = Field("rad/s^2", description="unit of max", examples=["deg/s^2"])
 
 
 class JointTorqueLimits(StrictModel):
-    max: ScalarOrVector
-    unit: Literal["Nm"] = "Nm"
-    allow_outside_urdf: bool = False
+    """Joint torque bounds |τ| ≤ max."""
+
+    max: ScalarOrVector = Field(description="in Nm (N for a prismatic joint), one value or one per joint",
+                                examples=[100, [176, 176, 110, 110, 110, 40, 40]])
+    unit: Literal["Nm"] = Field("Nm", description="unit of max: Nm", examples=["Nm"])
+    allow_outside_urdf: bool = Field(False, description=_ALLOW_OUTSIDE_URDF, examples=[False])
 
 
 class CartesianLimit(StrictModel):
@@ -45,18 +62,25 @@ class CartesianLimit(StrictModel):
     normal: min ≤ n̂ᵀp ≤ max, i.e. the origin stays between two parallel planes (a half-space with
     only one of them)."""
 
-    frame: str
-    axis: Literal["x", "y", "z"] | None = Field(None, description="a world axis; or give `normal`")
+    frame: str = Field(description="the robot frame (link, joint or spec frame) whose origin is bounded",
+                       examples=["tool", "link7"])
+    axis: Literal["x", "y", "z"] | None = Field(None, description="a world axis; or give `normal`", examples=["z"])
     normal: list[Number] | None = Field(
         None, min_length=3, max_length=3,
-        description="the plane's normal (3 values, any length: it is normalized); min/max are distances along it, m")
+        description="the plane's normal (3 values, unitless, any length: it is normalized); min/max are distances "
+                    "along it, m",
+        examples=[[1, 1, 0]])
     expressed_in: str | None = Field(
         None, description="a frame fixed to the world (the base, or a frame you define on it) in which normal, "
-                          "min and max are given; default: world")
-    min: Number | None = None
-    max: Number | None = None
-    max_velocity: Number | None = Field(None, gt=0, description="m/s, optional")
-    max_acceleration: Number = Field(5.0, gt=0, description="braking acceleration assumed by the viability bound, m/s²")
+                          "min and max are given; default: world", examples=["table"])
+    min: Number | None = Field(None, description="lower bound of the coordinate along the axis or normal, m",
+                               examples=[0.1])
+    max: Number | None = Field(None, description="upper bound of the coordinate along the axis or normal, m",
+                               examples=[0.8])
+    max_velocity: Number | None = Field(None, gt=0, description="bound on the frame's speed along the axis or "
+                                        "normal, m/s; optional", examples=[0.5])
+    max_acceleration: Number = Field(5.0, gt=0, description="braking acceleration assumed by the viability bound, m/s²",
+                                     examples=[5.0])
 
     @model_validator(mode="after")
     def _some_bound(self) -> "CartesianLimit":
@@ -72,8 +96,16 @@ class CartesianLimit(StrictModel):
 
 
 class LimitsSpec(StrictModel):
-    joint_position: JointPositionLimits | None = None
-    joint_velocity: JointVelocityLimits | None = None
-    joint_acceleration: JointAccelerationLimits | None = None
-    joint_torque: JointTorqueLimits | None = None
-    cartesian: list[CartesianLimit] = Field(default_factory=list)
+    """Bounds the controller keeps (joint bounds default to the URDF's)."""
+
+    joint_position: JointPositionLimits | None = Field(
+        None, description="joint position bounds; default: the URDF's", examples=[{"min": -160, "max": 160, "unit": "deg"}])
+    joint_velocity: JointVelocityLimits | None = Field(
+        None, description="joint velocity bounds; default: the URDF's", examples=[{"max": 90, "unit": "deg/s"}])
+    joint_acceleration: JointAccelerationLimits | None = Field(
+        None, description="joint acceleration bounds; default: none", examples=[{"max": 20}])
+    joint_torque: JointTorqueLimits | None = Field(
+        None, description="joint torque bounds; default: the URDF's effort limits", examples=[{"max": 100}])
+    cartesian: list[CartesianLimit] = Field(
+        default_factory=list, description="bounds on frame origins (planes the frames stay between)",
+        examples=[[{"frame": "tool", "axis": "z", "min": 0.1}]])

@@ -13,23 +13,25 @@ from .units import AngleUnit
 class ForceDisturbance(StrictModel):
     """A force and/or torque (world axes) applied at a point of a body during a time window."""
 
-    type: Literal["force"]
-    body: str = Field(description="link or frame the force acts on")
-    point: Vec3 = Field((0.0, 0.0, 0.0), description="application point in the body's frame, m")
-    force: Vec3 = Field((0.0, 0.0, 0.0), description="force in world axes, N")
-    torque: Vec3 = Field((0.0, 0.0, 0.0), description="torque in world axes, Nm")
-    start: Number = Field(ge=0, description="s")
-    duration: Number = Field(gt=0, description="s")
+    type: Literal["force"] = Field(description="force: a wrench on a body", examples=["force"])
+    body: str = Field(description="link or frame the force acts on", examples=["link7"])
+    point: Vec3 = Field((0.0, 0.0, 0.0), description="application point in the body's frame, m",
+                        examples=[[0, 0, 0.045]])
+    force: Vec3 = Field((0.0, 0.0, 0.0), description="force in world axes, N", examples=[[10, 0, 0]])
+    torque: Vec3 = Field((0.0, 0.0, 0.0), description="torque in world axes, Nm", examples=[[0, 0, 1]])
+    start: Number = Field(ge=0, description="when it starts, s after the start of the run", examples=[0.5])
+    duration: Number = Field(gt=0, description="how long it lasts, s", examples=[0.4])
 
 
 class JointTorqueDisturbance(StrictModel):
     """External joint torques (e.g. a person pushing) during a time window."""
 
-    type: Literal["joint_torque"]
-    torque: NumberList = Field(description="one value per joint, Nm")
-    start: Number = Field(ge=0)
-    duration: Number = Field(gt=0)
-    ramp: Number = Field(0.0, ge=0, description="rise and fall time, s")
+    type: Literal["joint_torque"] = Field(description="joint_torque: torques on the joints", examples=["joint_torque"])
+    torque: NumberList = Field(description="one value per joint, Nm (N for a prismatic joint)",
+                               examples=[[0, 5, 0, -5, 0, 0, 0]])
+    start: Number = Field(ge=0, description="when it starts, s after the start of the run", examples=[1.0])
+    duration: Number = Field(gt=0, description="how long it lasts (ramps included), s", examples=[2.0])
+    ramp: Number = Field(0.0, ge=0, description="rise and fall time, s", examples=[0.2])
 
 
 Disturbance = Annotated[ForceDisturbance | JointTorqueDisturbance, Field(discriminator="type")]
@@ -38,50 +40,73 @@ Disturbance = Annotated[ForceDisturbance | JointTorqueDisturbance, Field(discrim
 class Payload(StrictModel):
     """A mass the controller does not know about, rigidly attached at a frame (simulation only)."""
 
-    frame: str
-    mass: Number = Field(gt=0, description="kg")
-    com: Vec3 = Field((0.0, 0.0, 0.0), description="centre of mass in the frame, m")
+    frame: str = Field(description="link or frame the payload is attached to", examples=["tool"])
+    mass: Number = Field(gt=0, description="mass, kg", examples=[2.0])
+    com: Vec3 = Field((0.0, 0.0, 0.0), description="centre of mass in the frame, m", examples=[[0, 0, 0.05]])
 
 
 class Waypoints(StrictModel):
     """A path of points fed one after the other to a task with `reference: {input: true}`."""
 
-    task: str
-    points: list[NumberList] = Field(min_length=1)
-    tolerance: Number = Field(gt=0, description="a point counts as reached within this distance")
-    unit: AngleUnit = Field("rad", description="unit of angles in the points (orientation/joint tasks)")
+    task: str = Field(description="name of the task that follows the points", examples=["tool_position"])
+    points: list[NumberList] = Field(min_length=1, description=(
+        "the points, each the task's reference: [x, y, z] in m for a position task, roll, pitch, yaw in `unit` "
+        "for an orientation task, both for a pose, joint positions in `unit` for a joint task"),
+        examples=[[[0.5, 0.2, 0.5], [0.5, -0.2, 0.5]]])
+    tolerance: Number = Field(gt=0, description="a point counts as reached when the norm of the task error is within "
+                              "this, m (rad for orientation and joint tasks, whatever `unit`)", examples=[0.01])
+    unit: AngleUnit = Field("rad", description="unit of angles in the points (orientation/joint tasks)",
+                            examples=["deg"])
 
 
 class ExternalTorqueSensing(StrictModel):
     """How the controller's τ_ext input is produced from the simulated external torque."""
 
-    mode: Literal["ideal", "ignored", "noisy"] = "ideal"
-    noise_std: ScalarOrVector = Field(0.0, description="Gaussian noise, Nm")
-    bias: ScalarOrVector = Field(0.0, description="constant offset, Nm")
-    seed: Integer = 0
+    mode: Literal["ideal", "ignored", "noisy"] = Field(
+        "ideal", description="ideal: the true external torque (Nm); ignored: zero; noisy: with noise_std and bias",
+        examples=["noisy"])
+    noise_std: ScalarOrVector = Field(0.0, description="Gaussian noise (standard deviation), Nm, one value or one "
+                                      "per joint", examples=[0.5])
+    bias: ScalarOrVector = Field(0.0, description="constant offset, Nm, one value or one per joint", examples=[0.2])
+    seed: Integer = Field(0, description="seed of the noise generator (unitless)", examples=[0, 42])
 
 
 class ModelMismatch(StrictModel):
     """Differences between the simulated robot and the controller's model."""
 
-    mass_scale: Number = Field(1.0, gt=0, description="the controller's link masses and inertias are scaled by this")
+    mass_scale: Number = Field(1.0, gt=0, description="the controller's link masses and inertias are scaled by this "
+                               "factor (unitless)", examples=[1.1])
 
 
 class ScenarioSpec(StrictModel):
-    duration: Number = Field(gt=0, description="s")
-    initial_q: NumberList | None = Field(None, description="default: the middle of the joint range")
-    initial_dq: NumberList | None = None
-    unit: AngleUnit = Field("rad", description="unit of initial_q and initial_dq (per s)")
-    disturbances: list[Disturbance] = Field(default_factory=list)
-    payloads: list[Payload] = Field(default_factory=list)
-    waypoints: Waypoints | None = None
-    external_torque: ExternalTorqueSensing | Literal["ideal", "ignored", "noisy"] = "ideal"
-    model_mismatch: ModelMismatch | None = None
-    substeps: Integer = Field(1, ge=1, description="simulation steps per control period (the step is period/substeps)")
+    """A simulated run: its length, start, disturbances, payloads, waypoints and sensing."""
+
+    duration: Number = Field(gt=0, description="length of the run, s", examples=[2.0])
+    initial_q: NumberList | None = Field(None, description="initial joint positions in `unit`, one per joint; "
+                                         "default: the middle of the joint range", examples=[[0, 30, 0, -60, 0, 60, 0]])
+    initial_dq: NumberList | None = Field(None, description="initial joint velocities in `unit` per s, one per "
+                                          "joint; default: 0", examples=[[0, 0, 0, 10, 0, 0, 0]])
+    unit: AngleUnit = Field("rad", description="unit of initial_q and initial_dq (per s)", examples=["deg"])
+    disturbances: list[Disturbance] = Field(
+        default_factory=list, description="pushes: forces on bodies or torques on joints, each in a time window",
+        examples=[[{"type": "force", "body": "link7", "force": [10, 0, 0], "start": 0.5, "duration": 0.4}]])
+    payloads: list[Payload] = Field(default_factory=list, description="masses the controller does not know about",
+                                    examples=[[{"frame": "tool", "mass": 2.0}]])
+    waypoints: Waypoints | None = Field(None, description="points fed one after the other to a task's reference "
+                                        "input", examples=[{"task": "tool_position", "points": [[0.5, 0.2, 0.5]],
+                                                            "tolerance": 0.01}])
+    external_torque: ExternalTorqueSensing | Literal["ideal", "ignored", "noisy"] = Field(
+        "ideal", description="how the controller's measured external torque (Nm) is produced: a mode, or the "
+        "settings of the noisy sensor", examples=["ignored", {"mode": "noisy", "noise_std": 0.5}])
+    model_mismatch: ModelMismatch | None = Field(None, description="differences between the simulated robot and the "
+                                                 "controller's model", examples=[{"mass_scale": 1.1}])
+    substeps: Integer = Field(1, ge=1, description="simulation steps per control period (the step is period/substeps, "
+                              "s)", examples=[1, 4])
     integrator: Literal["euler", "implicitfast", "implicit", "rk4"] = Field(
         "rk4",
         description="MuJoCo integrator; rk4 integrates the torque held over the period as a real robot "
         "does (the limits are shaped for x + T v + ½T²a), the Euler-type ones move x by T²a",
+        examples=["rk4"],
     )
 
     @property

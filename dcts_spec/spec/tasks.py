@@ -30,10 +30,12 @@ REFERENCE_FIELDS: dict[str, tuple[str, ...]] = {
 class Gains(StrictModel):
     """PD gains of the task's error dynamics ẍ_d = kp Δx − kd ẋ (+ feed-forward)."""
 
-    kp: ScalarOrVector = Field(description="stiffness in 1/s², one value or one per task axis")
-    kd: ScalarOrVector = Field(description="damping in 1/s, one value or one per task axis")
+    kp: ScalarOrVector = Field(description="stiffness in 1/s², one value or one per task axis (0: a pure damping task)",
+                               examples=[100, [100, 100, 200]])
+    kd: ScalarOrVector = Field(description="damping in 1/s, one value or one per task axis", examples=[20, [20, 20, 28]])
     max_velocity: Number | None = Field(
-        None, gt=0, description="saturate the desired velocity (kp/kd)Δx to this norm (m/s or rad/s)"
+        None, gt=0, description="saturate the desired velocity (kp/kd)Δx to this norm (m/s, rad/s for orientation "
+        "and joint tasks)", examples=[0.25]
     )
 
     @model_validator(mode="after")
@@ -55,13 +57,18 @@ class Gains(StrictModel):
 class Reference(StrictModel):
     """Target of a task: constant (world frame) or a run-time input of the compiled controller."""
 
-    position: Vec3 | None = Field(None, description="target point [x, y, z] in the world, m")
-    rpy: Vec3 | None = Field(None, description="target orientation as roll, pitch, yaw (world)")
-    q: NumberList | None = Field(None, description="target joint positions")
-    unit: AngleUnit = Field("rad", description="unit of rpy or q")
-    input: bool = Field(False, description="the reference is an input of the controller at run time")
+    position: Vec3 | None = Field(None, description="target point [x, y, z] of the frame's origin in the world, m",
+                                  examples=[[0.5, 0.0, 0.6]])
+    rpy: Vec3 | None = Field(None, description="target orientation as roll, pitch, yaw (world), in `unit`",
+                             examples=[[180, 0, 0]])
+    q: NumberList | None = Field(None, description="target joint positions in `unit` (m for a prismatic joint), "
+                                 "one per joint of the task", examples=[[0, 30, 0, -60, 0, 60, 0]])
+    unit: AngleUnit = Field("rad", description="unit of rpy or q", examples=["deg"])
+    input: bool = Field(False, description="the reference is an input of the controller at run time (waypoints "
+                        "in simulation)", examples=[True])
     feedforward: bool = Field(
-        False, description="with input: also take a velocity and an acceleration feed-forward per task axis"
+        False, description="with input: also take a velocity (m/s, rad/s) and an acceleration (m/s², rad/s²) "
+        "feed-forward per task axis", examples=[True]
     )
 
     def given_fields(self) -> tuple[str, ...]:
@@ -69,17 +76,25 @@ class Reference(StrictModel):
 
 
 class TaskSpec(StrictModel):
-    name: str = Field(pattern=r"^[A-Za-z_][A-Za-z0-9_]*$", description="identifier (letters, digits, _)")
-    type: TaskType
-    frame: str | None = Field(None, description="frame of a Cartesian task")
+    """One task: a frame's position and/or orientation, or joint positions, with PD gains and a priority."""
+
+    name: str = Field(pattern=r"^[A-Za-z_][A-Za-z0-9_]*$", description="identifier (letters, digits, _), unique "
+                      "in the spec", examples=["tool_position", "posture"])
+    type: TaskType = Field(description="position (3 translation axes), orientation (3 rotation axes), pose (both) "
+                           "or joint (joint positions)", examples=["position", "joint"])
+    frame: str | None = Field(None, description="frame of a Cartesian task (link, joint or spec frame)",
+                              examples=["tool"])
     axes: list[Axis] | None = Field(None, description=(
         "controlled axes; their number is the task dimension. x, y, z: world axes; rx, ry, rz: all three are the "
         "world rotation, one or two are the frame's own axes ([rx, ry]: point the frame's z, its spin free; "
-        "[rz]: only the spin about the frame's z); see docs/tasks.md"))
-    joints: list[str] | None = Field(None, description="joints of a joint task (default: all)")
-    priority: Integer = Field(ge=1, description="1 is the highest; tasks may share a level")
-    gains: Gains
-    reference: Reference | None = None
+        "[rz]: only the spin about the frame's z); see docs/tasks.md"), examples=[["x", "y"], ["rx", "ry"]])
+    joints: list[str] | None = Field(None, description="joints of a joint task (default: all)",
+                                     examples=[["joint1", "joint3"]])
+    priority: Integer = Field(ge=1, description="1 is the highest; tasks may share a level", examples=[1, 2])
+    gains: Gains = Field(description="PD gains of the task", examples=[{"kp": 100, "kd": 20}])
+    reference: Reference | None = Field(
+        None, description="the target; a task with kp ≠ 0 needs one", examples=[{"position": [0.5, 0.0, 0.6]},
+                                                                               {"input": True}])
 
     @model_validator(mode="after")
     def _consistent(self) -> "TaskSpec":
