@@ -11,8 +11,10 @@ import pytest
 from reference import dynamics
 
 from dcts_spec.analysis.compare import markdown_table, table_rows
-from dcts_spec.analysis.metrics import SUMMARY_KEYS, json_ready, summarize
+from dcts_spec.analysis.metrics import SUMMARY_KEYS, json_ready, summarize, summary_units
+from dcts_spec.analysis.report import describe
 from dcts_spec.files import OWNED, OutputFolderError
+from dcts_spec.limits.naming import row_text
 from dcts_spec.analysis.outputs import atomic_directory
 from dcts_spec.analysis.run import RunResult
 from dcts_spec.analysis.series import TimeSeries, _kinetic_energies, evaluate
@@ -33,6 +35,7 @@ tasks:
   - {name: reach, type: position, frame: tool, priority: 1, gains: {kp: 100, kd: 20}, reference: {input: true}}
   - {name: tilt, type: orientation, frame: tool, axes: [rx, ry], priority: 2, gains: {kp: 50, kd: 10}, reference: {rpy: [3.1, 0, 0]}}
   - {name: posture, type: joint, priority: 3, gains: {kp: 10, kd: 5}, reference: {q: [0, 0.5, 0, -1, 0, 1, 0]}}
+  - {name: rest, type: joint, joints: [joint6, joint7], priority: 3, gains: {kp: 0, kd: 2}}
 scenario: {duration: 0.01}
 """
 
@@ -204,3 +207,88 @@ def test_a_run_folder_from_before_the_owned_list_is_still_written(tmp_path: Path
     with atomic_directory(out) as staging:
         (staging / "summary.json").write_text('{"new": 1}')
     assert (out / "summary.json").read_text() == '{"new": 1}' and (out / "mine.txt").read_text() == "keep"
+
+
+def _summary(case, **changes):
+    """summarize() of the case's log with `changes` to its arrays, and the run around it."""
+    spec, robot, log, _ = case
+    log = SimulationLog(**{**log.__dict__, **changes})
+    series = evaluate(spec, robot, log)
+    summary = summarize(log, series, robot, [1, 2, 3])
+    summary |= {"spec": "metrics", "formulation": "dcts", "runtime": "python", "period": 0.002}
+    summary["units"] = summary_units(summary, series, robot)
+    return RunResult("dcts", robot, log, series, summary, [1, 2, 3], {}), series
+
+
+def _numbers(value) -> bool:
+    """A number, or a map/list holding only numbers (what needs a unit)."""
+    if isinstance(value, dict):
+        return bool(value) and all(_numbers(v) for v in value.values())
+    if isinstance(value, list):
+        return all(_numbers(v) for v in value)
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+def test_every_number_in_the_summary_has_a_unit(case) -> None:
+    run, series = _summary(case)
+    s, units = run.summary, run.summary["units"]
+    missing = [k for k, v in s.items() if k != "units" and _numbers(v) and k not in units]
+    assert not missing
+    assert units["max_joint_position_violation"] == "rad" and units["max_joint_velocity_violation"] == "rad/s"
+    assert units["max_torque_violation"] == "Nm" and units["min_scaling"] == "1" and units["period"] == "s"
+    assert units["task_rms_error"] == {"reach": "m", "tilt": "rad", "posture": "rad", "rest": "rad/s"}
+    assert units["mean_acceleration_error"] == {"1": "m/s²", "2": "rad/s²", "3": "rad/s²"}
+    assert units["primary_mean_acceleration_error"] == "m/s²"
+    json.dumps(json_ready(s))
+
+
+def test_a_damping_task_reports_its_velocity_error(case) -> None:
+    spec, robot, log, series = case
+    joints = [5, 6]  # joint6, joint7
+    np.testing.assert_allclose(series.task_errors["rest"], -log.dq[:, joints], atol=1e-12)
+    assert series.damping == ("rest",)
+    run, _ = _summary(case)
+    s = run.summary
+    assert s["task_error_quantity"] == {"reach": "tracking error", "tilt": "tracking error",
+                                        "posture": "tracking error", "rest": "damping (velocity error)"}
+    assert s["task_rms_error"]["rest"] == pytest.approx(np.sqrt(np.mean(np.sum(log.dq[:, joints] ** 2, axis=1))))
+    assert s["task_rms_error"]["rest"] > 0.1  # not the 0 of an error it does not have
+
+
+def test_min_scaling_says_which_level_and_when(case) -> None:
+    scaling = np.ones((40, 3))
+    scaling[11] = [1.0, 0.4, 0.3]
+    scaling[20] = [1.0, 0.3, 1.0]  # the same minimum later at a higher level: the first time counts
+    run, _ = _summary(case, scaling=scaling)
+    assert run.summary["min_scaling"] == pytest.approx(0.3)
+    assert run.summary["min_scaling_at"] == {"priority": 3, "tasks": ["posture", "rest"], "time": pytest.approx(0.022)}
+    assert "min scaling 0.3 (priority 3: posture, rest, at t = 0.022 s)" in describe(run)
+    run, _ = _summary(case, scaling=np.ones((40, 3)))
+    assert run.summary["min_scaling_at"] is None and "min scaling 1 (never scaled)" in describe(run)
+
+
+def test_printed_summary_carries_units(case) -> None:
+    relaxed = np.zeros((40, 2), dtype=bool)
+    relaxed[[5, 6, 9], 1] = True
+    run, _ = _summary(case, bound_names=["joint:joint1", "cartesian:tool.z"], relaxed=relaxed)
+    text = describe(run)
+    s = run.summary
+    assert f"torque {s['max_torque_violation']:.3g} Nm" in text
+    assert f"reach {s['task_rms_error']['reach']:.3g} m (" in text
+    assert f"rest [damping, velocity] {s['task_rms_error']['rest']:.3g} rad/s" in text
+    assert f"position {s['max_joint_position_violation']:.3g} rad," in text
+    # The relaxed bound reads as validate words it: the same helper, the same text.
+    assert s["relaxed_bounds"]["cartesian:tool.z"] == {"bound": "0.3 m ≤ tool.z", "steps": 3,
+                                                      "first": pytest.approx(0.01), "last": pytest.approx(0.018)}
+    assert "relaxed    0.3 m ≤ tool.z: 3 steps between t = 0.01 s and 0.018 s" in text
+
+
+def test_relaxed_bounds_are_worded_as_validate_words_them() -> None:
+    spec = load_spec_text(SPEC.replace("reference: {input: true}", "reference: {position: [0.5, 0, 0.1]}"))
+    report = validate_spec(spec)
+    warning = next(str(d) for d in report.diagnostics if "tool.z" in str(d))
+    assert f"outside its bound {row_text(report.robot, 'cartesian:tool.z')} " in warning
+    lim = report.robot.limits
+    assert row_text(report.robot, "joint:joint2") == (
+        f"{lim.q_min[1]:.4g} rad ≤ joint2 ≤ {lim.q_max[1]:.4g} rad, |joint2'| ≤ 1 rad/s")
+    assert row_text(report.robot, "joint:nope") == "joint:nope"

@@ -112,6 +112,13 @@ def test_unmodelled_payload_shows_up_in_measured_torque() -> None:
     static = point_jacobian(sim.robot.model, log.q[k - 1], "tool", np.array([0, 0, 0.05])).T @ weight
     assert np.abs(log.dq[-1]).max() < 0.01  # nearly at rest again: the weight is what is left
     np.testing.assert_allclose(log.tau_ext_measured[k], static, atol=0.02 * np.abs(static).max())
+    # The analysis counts the payload as a disturbance: what the controller measured, one step later.
+    run = analyze(sim, log)
+    payload = run.series.payload_torque
+    np.testing.assert_allclose(log.tau_ext_measured[1:], payload[:-1], atol=1e-3 * np.abs(static).max())
+    assert run.summary["max_disturbance_torque"] == pytest.approx(np.abs(payload).max())
+    assert run.summary["max_disturbance_torque"] > 0.9 * np.abs(static).max()
+    assert run.summary["max_external_torque_estimate_error"] < 1e-3 * np.abs(static).max()
 
 
 def test_joint_torque_profile_with_ramps() -> None:

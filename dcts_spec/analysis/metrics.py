@@ -6,9 +6,12 @@ Definitions (N samples t_k = k T; violations are 0 when a limit holds or does no
 - max_torque_violation = max_{k,j} max(0, |τ_j| − τ_max,j), Nm (τ as applied)
 - max_cartesian_violation = max over bounds and samples of the distance outside [c_min, c_max], m
 - solver_failures = #{k: status_k < 0}; limits_relaxed = #{k: status_k = 1}; relaxed_bounds: for
-  each joint/Cartesian bound that gave way, its number of steps and the first and last time
-- min_scaling = min over samples and levels of the task scalings
-- task_rms_error[t] = sqrt(mean_k ‖Δx_t,k‖²), task_mean_error[t] = mean_k ‖Δx_t,k‖ (SI units)
+  each joint/Cartesian bound that gave way (keyed by its row name), the bound as validate words it,
+  its number of steps and the first and last time
+- min_scaling = min over samples and levels of the task scalings; min_scaling_at: the first sample
+  and the highest level where it occurs (priority, its tasks, time), None if no level ever scaled
+- task_rms_error[t] = sqrt(mean_k ‖Δx_t,k‖²), task_mean_error[t] = mean_k ‖Δx_t,k‖ (SI units); for
+  a pure damping task (no reference) Δx is the velocity error −ẋ: task_error_quantity says which
 - task_final_error[t] = max ‖Δx_t,k‖ over the last 10 % of the samples: a task still moving or
   oscillating at the end shows its amplitude here, where an RMS over the run would hide it
 - mean_acceleration_error[p] = mean_k ‖J_p a_k + J̇_p q̇_k − ẍ_d,p,k‖ with the actual acceleration
@@ -17,9 +20,16 @@ Definitions (N samples t_k = k T; violations are 0 when a limit holds or does no
 - kinetic_energy_peak = max_k ½q̇ᵀMq̇, split M-orthogonally into task_space_kinetic_energy_peak
   (max_k ½ẋᵀΛẋ, all levels' Jacobians stacked, Λ = (J M⁻¹ Jᵀ)⁺) and null_space_kinetic_energy_peak
   (max_k of the rest)
+- max_disturbance_torque = max_{k,j} |τ_dist,j,k + τ_payload,j,k|: pushes, joint torques and the
+  payloads the controller does not know (series.payload_torque), all external to its model
+- max_external_torque_estimate_error = max_{k,j} |τ̂_ext,j,k+1 − (τ_dist + τ_payload)_j,k|: how far
+  the controller's τ_ext input was from that (one step late: a motion-based estimate needs the step's
+  acceleration); the model mismatch, sensor noise and bias, or all of it with `ignored` sensing
 - waypoints_reached = points reached (None without waypoints); waypoint_times: when each was, or None
 - realtime_factor = simulated time / wall time of the simulation loop (controller, physics and
   logging; not the viewer, video or progress display)
+
+`units` maps every numeric entry to its unit (a map per task or level for the nested ones).
 """
 
 from __future__ import annotations
@@ -30,9 +40,11 @@ from typing import Any
 import numpy as np
 
 from ..controller import STATUS_LIMITS_RELAXED
+from ..limits.naming import row_text
 from ..robot.model import Robot
 from ..sim.log import SimulationLog
 from .series import TimeSeries
+from .units import FIXED_UNITS, joints_unit, per, torque_unit
 
 # The headline metrics: numbers (or per-task numbers) in every summary, finite for a completed run.
 SUMMARY_KEYS = (
@@ -57,6 +69,7 @@ def summarize(log: SimulationLog, series: TimeSeries, robot: Robot, priorities: 
     velocity_excess = _excess(np.abs(log.dq), lim.v_max)
     acceleration_errors = {str(p): _mean_norm(series.acceleration_errors[p]) for p in priorities}
     waypoints = log.waypoint_times
+    disturbance = log.tau_ext_true + series.payload_torque
     summary: dict[str, Any] = {
         "duration": log.duration,
         "steps": log.steps,
@@ -69,8 +82,11 @@ def summarize(log: SimulationLog, series: TimeSeries, robot: Robot, priorities: 
         "max_cartesian_violation": _cartesian_violation(series, robot),
         "solver_failures": int(np.count_nonzero(log.status < 0)),
         "limits_relaxed": int(np.count_nonzero(log.status == STATUS_LIMITS_RELAXED)),
-        "relaxed_bounds": _relaxed_bounds(log),
+        "relaxed_bounds": _relaxed_bounds(log, robot),
         "min_scaling": _peak(log.scaling, np.min, default=1.0),
+        "min_scaling_at": _min_scaling_at(log, series, priorities),
+        "task_error_quantity": {t: "damping (velocity error)" if t in series.damping else "tracking error"
+                                for t in series.task_errors},
         "task_rms_error": {t: _rms_norm(e) for t, e in series.task_errors.items()},
         "task_mean_error": {t: _mean_norm(e) for t, e in series.task_errors.items()},
         "task_final_error": {t: _final_norm(e) for t, e in series.task_errors.items()},
@@ -80,6 +96,8 @@ def summarize(log: SimulationLog, series: TimeSeries, robot: Robot, priorities: 
         "kinetic_energy_peak": _peak(series.kinetic_energy),
         "task_space_kinetic_energy_peak": _peak(series.task_kinetic_energy),
         "null_space_kinetic_energy_peak": _peak(series.null_kinetic_energy),
+        "max_disturbance_torque": _peak(np.abs(disturbance)),
+        "max_external_torque_estimate_error": _peak(np.abs(log.tau_ext_measured[1:] - disturbance[:-1])),
         "waypoints_total": int(waypoints.size),
         "waypoints_reached": int(np.count_nonzero(np.isfinite(waypoints))) if waypoints.size else None,
         "waypoint_times": [None if math.isnan(t) else float(t) for t in waypoints],
@@ -89,13 +107,46 @@ def summarize(log: SimulationLog, series: TimeSeries, robot: Robot, priorities: 
     return summary
 
 
-def _relaxed_bounds(log: SimulationLog) -> dict[str, dict[str, float | int]]:
-    """Each bound that gave way: how many steps, and the first and last time (s)."""
+def summary_units(summary: dict[str, Any], series: TimeSeries, robot: Robot) -> dict[str, Any]:
+    """The unit of every numeric entry of `summary` (per task or level for the nested ones): the
+    `units` entry of summary.json."""
+    joint = joints_unit(robot)
+    levels = {str(p): per(u, "s²") for p, u in series.level_units.items()}
+    primary = next(iter(levels.values()), "1")
+    units: dict[str, Any] = {
+        "max_joint_position_violation": joint,
+        "max_joint_velocity_violation": per(joint, "s"),
+        "max_torque_violation": torque_unit(robot),
+        "max_disturbance_torque": torque_unit(robot),
+        "max_external_torque_estimate_error": torque_unit(robot),
+        "relaxed_bounds": {"steps": "steps", "first": "s", "last": "s"},
+        "min_scaling_at": {"time": "s"},
+        "primary_mean_acceleration_error": primary,
+        "mean_acceleration_error": levels,
+        **{key: dict(series.task_units) for key in ("task_rms_error", "task_mean_error", "task_final_error")},
+    }
+    return {key: units.get(key, FIXED_UNITS.get(key)) for key in summary
+            if key in units or key in FIXED_UNITS}
+
+
+def _min_scaling_at(log: SimulationLog, series: TimeSeries, priorities: list[int]) -> dict[str, Any] | None:
+    """Where the smallest scaling is first reached: the priority level, its tasks, the time."""
+    if not log.scaling.size or log.scaling.min() >= 1.0:
+        return None
+    # Row-major: the earliest sample first, then the highest level at it.
+    k, level = np.unravel_index(np.argmin(log.scaling), log.scaling.shape)
+    priority = priorities[level]
+    return {"priority": priority, "tasks": list(series.level_tasks.get(priority, ())), "time": float(log.time[k])}
+
+
+def _relaxed_bounds(log: SimulationLog, robot: Robot) -> dict[str, dict[str, Any]]:
+    """Each bound that gave way: the bound as text, how many steps, the first and last time (s)."""
     out = {}
     for j, name in enumerate(log.bound_names):
         steps = np.flatnonzero(log.relaxed[:, j])
         if steps.size:
-            out[name] = {"steps": int(steps.size), "first": float(log.time[steps[0]]), "last": float(log.time[steps[-1]])}
+            out[name] = {"bound": row_text(robot, name), "steps": int(steps.size),
+                         "first": float(log.time[steps[0]]), "last": float(log.time[steps[-1]])}
     return out
 
 

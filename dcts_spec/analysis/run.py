@@ -13,7 +13,7 @@ from ..robot.model import Robot
 from ..sim.log import SimulationLog
 from ..sim.runner import Simulation
 from ..tasks import CartesianTask
-from .metrics import json_ready, summarize
+from .metrics import json_ready, summarize, summary_units
 from .series import TimeSeries, evaluate
 
 
@@ -65,6 +65,7 @@ def analyze(sim: Simulation, log: SimulationLog, label: str | None = None) -> Ru
         "mass_scale": sim.scenario.mass_scale,
         **summarize(log, series, robot, priorities),
     }
+    summary["units"] = summary_units(summary, series, robot)
     result = RunResult(label or sim.formulation, robot, log, series, summary, priorities,
                        {t.name: t.row_names for t in sim.tasks})
     follower = sim.waypoints

@@ -5,20 +5,27 @@ positions, M, g and the stacked task Jacobian — is mapped over the samples; th
 are then batched NumPy linear algebra. Everything uses the simulated robot's rigid-body
 model (true masses, no payloads): the payloads and the controller's model errors are what
 is being measured against.
+
+A pure damping task (no reference, kd only) has no position error; its error here is its
+velocity error 0 − ẋ, in units per second.
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import casadi as ca
 import numpy as np
+import pinocchio as pin
 
 from ..formulations import ControlProblem, build_problem
 from ..robot.model import Robot
 from ..sim.log import SimulationLog
 from ..spec import Spec
-from ..tasks import CartesianTask
+from ..spec.scenario import Payload
+from ..tasks import CartesianTask, Task
+from .units import combine, per, task_unit
 
 PINV_RCOND = 1e-10  # relative cut-off of the pseudo-inverse of J M⁻¹ Jᵀ
 
@@ -27,20 +34,26 @@ PINV_RCOND = 1e-10  # relative cut-off of the pseudo-inverse of J M⁻¹ Jᵀ
 class TimeSeries:
     """Per-sample derived quantities, aligned with the log."""
 
-    task_errors: dict[str, np.ndarray]  # task → (N, m) Δx
+    task_errors: dict[str, np.ndarray]  # task → (N, m) Δx; −ẋ for a pure damping task
     acceleration_errors: dict[int, np.ndarray]  # priority → (N, m) J a + J̇q̇ − ẍ_d
     frame_positions: dict[str, np.ndarray]  # frame → (N, 3), Cartesian task and bound frames
     kinetic_energy: np.ndarray  # ½ q̇ᵀ M q̇
     task_kinetic_energy: np.ndarray  # ½ ẋᵀ Λ ẋ, all task rows stacked
     null_kinetic_energy: np.ndarray  # the rest
     acceleration_energy: np.ndarray  # ½ (τ − g)ᵀ M⁻¹ (τ − g)
+    payload_torque: np.ndarray  # (N, n) joint torque the scenario's payloads exert (0 without)
+    damping: tuple[str, ...]  # pure damping tasks: their task_errors are velocity errors
+    task_units: dict[str, str]  # task → unit of its task_errors rows ("m", "rad", "rad/s", "m, rad")
+    level_tasks: dict[int, tuple[str, ...]]  # priority → its tasks
+    level_units: dict[int, str]  # priority → unit of its rows' positions (accelerations: per s²)
 
     def arrays(self) -> dict[str, np.ndarray]:
         """Flat name → array, for saving next to the log."""
-        out = {f"error_{k}": v for k, v in self.task_errors.items()}
+        out = {f"{'velocity_error' if k in self.damping else 'error'}_{k}": v for k, v in self.task_errors.items()}
         out |= {f"acceleration_error_{k}": v for k, v in self.acceleration_errors.items()}
         out |= {f"position_{k}": v for k, v in self.frame_positions.items()}
-        for name in ("kinetic_energy", "task_kinetic_energy", "null_kinetic_energy", "acceleration_energy"):
+        for name in ("kinetic_energy", "task_kinetic_energy", "null_kinetic_energy", "acceleration_energy",
+                     "payload_torque"):
             out[name] = getattr(self, name)
         return out
 
@@ -69,23 +82,61 @@ def evaluate(spec: Spec, robot: Robot, log: SimulationLog) -> TimeSeries:
         values = [np.array(v).T for v in mapped(log.q.T, log.dq.T, log.ref.T, log.ddq.T)]
     out = dict(zip(outputs, values, strict=True))
 
-    task_errors, acceleration_errors, row = {}, {}, 0
-    for lv in levels:
-        acceleration_errors[lv.priority] = out["acceleration_error"][:, row: row + lv.dim]
-        for task in lv.tasks:
-            task_errors[task.name] = out["error"][:, row: row + task.dim]
-            row += task.dim
-    positions = {f: out["position"][:, 3 * i: 3 * i + 3] for i, f in enumerate(frames)}
-
     # CasADi reshapes column-major: the flat vector holds the columns one after the other.
     M = out["M"].reshape(samples, n, n).transpose(0, 2, 1)
     m = jacobian.shape[0]
     J = out["J"].reshape(samples, n, m).transpose(0, 2, 1)
+    velocity_error = -np.einsum("kij,kj->ki", J, log.dq)
+
+    task_errors, acceleration_errors, units, damping, row = {}, {}, {}, [], 0
+    for lv in levels:
+        acceleration_errors[lv.priority] = out["acceleration_error"][:, row: row + lv.dim]
+        for task in lv.tasks:
+            rows = slice(row, row + task.dim)
+            units[task.name] = task_unit(task, robot)
+            if _pure_damping(task):
+                damping.append(task.name)
+                task_errors[task.name] = velocity_error[:, rows]
+                units[task.name] = per(units[task.name], "s")
+            else:
+                task_errors[task.name] = out["error"][:, rows]
+            row += task.dim
+    positions = {f: out["position"][:, 3 * i: 3 * i + 3] for i, f in enumerate(frames)}
+    level_tasks = {lv.priority: tuple(t.name for t in lv.tasks) for lv in levels}
+    level_units = {lv.priority: combine(task_unit(t, robot) for t in lv.tasks) for lv in levels}
+
     kinetic, task_kinetic = _kinetic_energies(M, J, log.dq)
     effort = log.tau - out["g"]
     acceleration_energy = 0.5 * np.einsum("ki,ki->k", effort, np.linalg.solve(M, effort[..., None])[..., 0])
+    payloads = spec.scenario.payloads if spec.scenario is not None else []
     return TimeSeries(task_errors, acceleration_errors, positions, kinetic, task_kinetic,
-                      kinetic - task_kinetic, acceleration_energy)
+                      kinetic - task_kinetic, acceleration_energy, payload_torque(robot, payloads, log),
+                      tuple(damping), units, level_tasks, level_units)
+
+
+def _pure_damping(task: Task) -> bool:
+    """No reference at all: the task only damps its velocity (kd), its Δx is 0 by construction."""
+    return not task.reference_is_input and not task.constant_reference()
+
+
+def payload_torque(robot: Robot, payloads: Sequence[Payload], log: SimulationLog) -> np.ndarray:
+    """The joint torque the payloads (point masses at frames, unknown to the controller) exert on
+    the robot at each step, with the step's actual acceleration: what the τ_ext estimate sees of
+    them, rnea(q, q̇, a) − rnea_with_payloads(q, q̇, a)."""
+    out = np.zeros_like(log.tau)
+    if not payloads or not log.steps:
+        return out
+    model = robot.model
+    loaded = model.copy()
+    for p in payloads:
+        frame = loaded.frames[loaded.getFrameId(p.frame)]
+        mass = pin.Inertia(float(p.mass), frame.placement.act(np.array(p.com, dtype=float)), np.zeros((3, 3)))
+        loaded.inertias[frame.parentJoint] = loaded.inertias[frame.parentJoint] + mass
+    data, loaded_data = model.createData(), loaded.createData()
+    for k in range(log.steps):
+        out[k] = pin.rnea(model, data, log.q[k], log.dq[k], log.ddq[k]) - pin.rnea(
+            loaded, loaded_data, log.q[k], log.dq[k], log.ddq[k])
+    return out
 
 
 def _kinetic_energies(M: np.ndarray, J: np.ndarray, dq: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

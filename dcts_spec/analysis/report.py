@@ -1,0 +1,66 @@
+"""The few lines about a run printed to the terminal, every number with its unit (summary.json's)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from .run import RunResult
+
+
+def quantity(value: float | None, unit: str) -> str:
+    """`0.012 rad`, `3 steps`; a ratio ("1") without a unit; – for a missing value."""
+    if value is None:
+        return "–"
+    number = f"{value:.3g}"
+    return number if unit == "1" else f"{number} {unit}"
+
+
+def min_scaling_text(summary: dict[str, Any]) -> str:
+    """`0.42 (priority 2: posture, at t = 1.234 s)` or `1 (never scaled)`."""
+    at = summary.get("min_scaling_at")
+    if at is None:
+        return f"{summary['min_scaling']:.3g} (never scaled)"
+    tasks = ", ".join(at["tasks"])
+    return f"{summary['min_scaling']:.3g} (priority {at['priority']}: {tasks}, at t = {at['time']:.4g} s)"
+
+
+def describe(run: RunResult) -> str:
+    """A few lines about a run for the terminal."""
+    s, u = run.summary, run.summary["units"]
+    speed = f" ({s['realtime_factor']:.3g}× real time)" if s["realtime_factor"] else ""
+    lines = [f"{s['spec']}: {s['formulation']}, {s['runtime']} runtime — {s['duration']:.3g} s simulated in "
+             f"{s['wall_time']:.3g} s{speed}"]
+    if not s["completed"]:
+        lines.append(f"  UNSTABLE   MuJoCo stopped the run at t = {s['diverged_at']:.4g} s")
+
+    def q(key: str) -> str:
+        return quantity(s[key], u[key])
+
+    lines.append(f"  limits     worst excess: position {q('max_joint_position_violation')}, velocity "
+                 f"{q('max_joint_velocity_violation')} ({100 * s['max_joint_velocity_violation_ratio']:.3g}% "
+                 f"of its limit), torque {q('max_torque_violation')}, Cartesian {q('max_cartesian_violation')}")
+    lines.append(f"  solver     {s['solver_failures']} failures, {s['limits_relaxed']} steps with relaxed limits, "
+                 f"min scaling {min_scaling_text(s)}")
+    for r in s.get("relaxed_bounds", {}).values():
+        lines.append(f"  relaxed    {r['bound']}: {r['steps']} steps between t = {r['first']:.4g} s and {r['last']:.4g} s")
+    lines.append(f"  tasks      RMS error (final): {task_errors_text(s)}")
+    lines.append(f"             priority-1 mean acceleration error {q('primary_mean_acceleration_error')}")
+    lines.append(f"  external   disturbance torque up to {q('max_disturbance_torque')} (payloads included), "
+                 f"the controller's τ_ext off by up to {q('max_external_torque_estimate_error')}")
+    lines.append(f"  energy     ∫acceleration energy {q('acceleration_energy_integral')}, kinetic peaks: "
+                 f"task {q('task_space_kinetic_energy_peak')}, null space {q('null_space_kinetic_energy_peak')}")
+    if s["waypoints_total"]:
+        lines.append(f"  waypoints  {s['waypoints_reached']}/{s['waypoints_total']} reached")
+    return "\n".join(lines)
+
+
+def task_errors_text(summary: dict[str, Any]) -> str:
+    """`reach 1.2e-3 m (0.3e-3 m), rest [damping, velocity] 0.01 rad/s (0.002 rad/s)`."""
+    units = summary["units"]["task_rms_error"]
+    parts = []
+    for name, rms in summary["task_rms_error"].items():
+        damping = summary["task_error_quantity"][name] != "tracking error"
+        label = f"{name} [damping, velocity]" if damping else name
+        unit = units[name]
+        parts.append(f"{label} {quantity(rms, unit)} ({quantity(summary['task_final_error'][name], unit)})")
+    return ", ".join(parts) or "no tasks"
