@@ -21,6 +21,7 @@ from typer.core import TyperCommand, TyperGroup
 
 from .codegen.build import TARGETS
 from .formulations import FORMULATIONS
+from .phases import phase, reporting
 from .sim.runtime import RUNTIMES
 from .spec import SpecError
 
@@ -108,6 +109,17 @@ def _exit_1_on_errors() -> Iterator[None]:
         raise typer.Exit(1) from None
 
 
+def _say(message: str) -> None:
+    typer.secho(f"{message} …", err=True, dim=True)
+
+
+@contextmanager
+def _feedback(quiet: bool) -> Iterator[None]:
+    """Long phases (building, generating C, compiling, simulating, plotting) on stderr, unless quiet."""
+    with reporting(None if quiet else _say):
+        yield
+
+
 def _positive(value: Optional[float]) -> Optional[float]:
     if value is not None and not value > 0:
         raise typer.BadParameter(f"must be positive, got {value:g}")
@@ -142,6 +154,7 @@ CacheOption = Annotated[bool, typer.Option(
     "--cache/--no-cache", help="c runtime: reuse the built bundle from the cache ($DCTS_CACHE_DIR or "
     "~/.cache/dcts/bundles); --no-cache builds it afresh and leaves the cache alone")]
 JsonOption = Annotated[bool, typer.Option("--json", help="machine-readable output")]
+QuietOption = Annotated[bool, typer.Option("--quiet", "-q", help="no progress messages on stderr")]
 
 
 @command()
@@ -150,6 +163,7 @@ def validate(
     as_json: Annotated[bool, typer.Option("--json", help="machine-readable output: a list, one report per file")]
     = False,
     check: Annotated[bool, typer.Option("--check", help="also compile every formulation and report QP sizes")] = False,
+    quiet: QuietOption = False,
 ) -> None:
     """Check spec files and summarize them; exit 1 if any has an error."""
     from .controller import compile_check
@@ -167,7 +181,9 @@ def validate(
             continue
         result = report.to_dict()
         if check:
-            result["formulations"] = compile_check(report)
+            with _feedback(quiet):
+                phase(f"compiling {report.spec.name} with every formulation")
+                result["formulations"] = compile_check(report)
         results.append(result)
         if not as_json:
             typer.echo(report.summary())
@@ -210,7 +226,7 @@ def simulate(
     plots: Annotated[bool, typer.Option("--plots/--no-plots", help="write the PNG plots")] = True,
     viewer: Annotated[bool, typer.Option("--viewer", help="watch the run in MuJoCo's viewer (needs a display)")] = False,
     video: Annotated[Optional[Path], typer.Option(help="render the run offscreen to this MP4 file")] = None,
-    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="no progress bar, no summary")] = False,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="no progress messages or bar, no summary")] = False,
     cache: CacheOption = True,
 ) -> None:
     """Run the compiled controller against MuJoCo through the spec's scenario; write log, summary, plots."""
@@ -221,7 +237,9 @@ def simulate(
     from .sim.commands import RunOptions, simulate_command
 
     options = RunOptions(runtime=runtime, duration=duration, quiet=quiet, cache=cache)
-    raise typer.Exit(simulate_command(file, out, options, formulation, plots, viewer, video))
+    with _feedback(quiet):
+        code = simulate_command(file, out, options, formulation, plots, viewer, video)
+    raise typer.Exit(code)
 
 
 @command()
@@ -233,7 +251,7 @@ def compare(
     runtime: RuntimeOption = "c",
     duration: DurationOption = None,
     plots: Annotated[bool, typer.Option("--plots/--no-plots", help="write the overlay plots")] = True,
-    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="no progress bar, no table")] = False,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="no progress messages or bar, no table")] = False,
     cache: CacheOption = True,
 ) -> None:
     """Run the same scenario with several formulations; write a metrics table and overlay plots."""
@@ -241,7 +259,9 @@ def compare(
 
     options = RunOptions(runtime=runtime, duration=duration, quiet=quiet, cache=cache)
     names: list[str] = formulations  # type: ignore[assignment]  # (the callback split it)
-    raise typer.Exit(compare_command(file, out, options, names, plots))
+    with _feedback(quiet):
+        code = compare_command(file, out, options, names, plots)
+    raise typer.Exit(code)
 
 
 @command("compile")
@@ -257,17 +277,21 @@ def compile_(
                                                      "PyPI's source distribution, cached")] = None,
     qemu: Annotated[bool, typer.Option("--qemu/--no-qemu", help="cortex-m7: run the golden test on qemu")] = True,
     as_json: Annotated[bool, typer.Option("--json", help="print the bundle's manifest")] = False,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="no progress messages, no summary")] = False,
 ) -> None:
     """Generate the C bundle of a spec (QP data, DAQP solve, header, build files, golden test) and build it."""
     from .codegen import compile_bundle
     from .spec import load_spec
 
-    with _exit_1_on_errors():
+    with _exit_1_on_errors(), _feedback(quiet):
         spec = load_spec(file)
         directory = out or output or Path("build") / spec.name
         report = compile_bundle(spec, directory, formulation=formulation, build=not no_build, target=target,
                                 daqp_src=daqp_src, qemu=qemu)
-    typer.echo(json.dumps(report.manifest, indent=2) if as_json else "\n".join(report.lines()))
+    if as_json:
+        typer.echo(json.dumps(report.manifest, indent=2))
+    elif not quiet:
+        typer.echo("\n".join(report.lines()))
 
 
 @command()
@@ -277,12 +301,15 @@ def bench(
     formulation: FormulationOption = None,
     states: Annotated[int, typer.Option(min=1, help="states timed in C (per state set)")] = 10000,
     python_states: Annotated[int, typer.Option(min=1, help="states timed in the Python runtime")] = 500,
+    quiet: QuietOption = False,
 ) -> None:
     """Time the generated C step (data and solve), the Python runtime and Pinocchio's dynamics terms."""
     from .codegen.bench import bench as run_bench
     from .codegen.bench import format_report
 
-    with _exit_1_on_errors():
+    with _exit_1_on_errors(), _feedback(quiet):
+        phase(f"benchmarking {file}: build the bundle, then time {states} states in C (twice), {python_states} "
+              "in Python, Pinocchio's terms and an instruction count")
         result = run_bench(file, formulation=formulation, states=states, python_states=python_states)
     typer.echo(json.dumps(result, indent=2) if as_json else format_report(result))
 

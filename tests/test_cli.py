@@ -10,14 +10,12 @@ import subprocess
 from pathlib import Path
 
 import pytest
+from command_line import MINIMAL, invoke, short_spec
 from typer.testing import CliRunner
 
 from dcts_spec import cli
 from dcts_spec.cli import app
 from dcts_spec.formulations import FORMULATIONS
-
-ROOT = Path(__file__).resolve().parents[1]
-MINIMAL = ROOT / "specs" / "minimal.yaml"
 COMMANDS = ("validate", "schema", "simulate", "compare", "compile", "bench")
 WRITERS = ("schema", "simulate", "compare", "compile")
 
@@ -28,18 +26,6 @@ runner = CliRunner()
 def _private_bundle_cache(tmp_path_factory, monkeypatch):
     """No test writes into the user's bundle cache."""
     monkeypatch.setenv("DCTS_CACHE_DIR", str(tmp_path_factory.getbasetemp() / "bundle-cache"))
-
-
-def invoke(*args: str):
-    return runner.invoke(app, list(args), env={"COLUMNS": "200"})
-
-
-def short_spec(tmp_path: Path, name: str = "short") -> Path:
-    """minimal.yaml under another name with a 0.03 s scenario, in tmp_path."""
-    text = MINIMAL.read_text().replace("name: minimal", f"name: {name}").replace("duration: 2.0", "duration: 0.03")
-    path = tmp_path / f"{name}.yaml"
-    path.write_text(text)
-    return path
 
 
 @pytest.mark.parametrize("command", COMMANDS)

@@ -21,6 +21,7 @@ from functools import lru_cache
 from pathlib import Path
 
 from ..files import OutputFolderError, check_writable, install
+from ..phases import building_controller, phase
 from ..controller import Controller
 from ..robot.model import Robot
 from ..spec import Spec, load_spec
@@ -48,6 +49,7 @@ def daqp_sources(cache: Path | None = None, version: str = DAQP_VERSION) -> Path
     cache.mkdir(parents=True, exist_ok=True)
     archive = cache / f"daqp-{version}.tar.gz"
     if not archive.is_file():
+        phase(f"downloading DAQP {version}'s C sources with pip")
         command = [sys.executable, "-m", "pip", "download", "--no-binary", ":all:", "--no-deps",
                    f"daqp=={version}", "-d", str(cache)]
         done = subprocess.run(command, capture_output=True, text=True)
@@ -194,6 +196,7 @@ def _controller_and_model(spec: Spec, formulation: str | None, robot: Robot | No
     if model.nv != report.robot.nv or model.joint_names != report.robot.joint_names:
         raise CodegenError(f"the robot model ({model.nv} joints: {', '.join(model.joint_names)}) does not have the "
                            f"spec's joints ({', '.join(report.robot.joint_names)})")
+    building_controller(spec.name, formulation or spec.controller.formulation)
     try:
         controller = Controller(spec, model, formulation)
     except ValueError as exc:
@@ -265,6 +268,7 @@ def _keep_daqp_objects(directory: Path, cc: str) -> None:
 
 def build_host(directory: Path, manifest: dict, cc: str | None = None) -> dict:
     """Build the host library and the test with `make`, run the test and the heap check."""
+    phase("compiling C and running the golden-vector test")
     variables = {"CC": cc} if cc else {}
     compiler = cc or os.environ.get("CC", "cc")
     _reuse_daqp_objects(directory, compiler)
@@ -288,6 +292,7 @@ def build_firmware(directory: Path, manifest: dict, qemu: bool = True) -> dict:
     """Cross-compile for Cortex-M7 (double FPU), report flash/RAM, run the golden test on qemu."""
     if shutil.which("arm-none-eabi-gcc") is None:
         raise CodegenError("arm-none-eabi-gcc not found: install gcc-arm-none-eabi and libnewlib-arm-none-eabi")
+    phase("cross-compiling for cortex-m7")
     variables: dict[str, str] = {}
     make(directory, ["firmware"], "firmware build", variables, timeout=1200)
     name = manifest["name"]
@@ -404,6 +409,7 @@ def compile_bundle(
         raise CodegenError(f"cannot write into {out_dir.parent}: {exc.strerror}") from None
     try:
         source = (Path(daqp_src) if daqp_src else daqp_sources()) if controller.nx else None
+        phase("generating C")
         sources = generate_sources(controller, tmp, spec_bytes=spec_bytes, golden_count=golden_count,
                                    daqp_source=source, model=model)
         manifest = sources.manifest

@@ -20,6 +20,7 @@ from ..analysis.outputs import atomic_directory, earlier_output, write_run
 from ..files import OutputFolderError, check_writable
 from ..analysis.run import RunResult, analyze
 from ..formulations import FORMULATIONS
+from ..phases import building_controller, phase
 from ..spec import Spec, SpecError, load_spec
 from .progress import ProgressBar
 from .runner import Hook, Simulation, prepare_simulation
@@ -90,6 +91,7 @@ def _simulate(file: Path, out: Path | None, options: RunOptions, formulation: st
             raise
         if recorder:
             recorder.close()
+        phase(f"writing the log, summary{' and plots' if plots else ''}")
         with atomic_directory(out) as staging:
             write_run(run, staging, plots=plots)
     if not options.quiet:
@@ -111,6 +113,7 @@ def _compare(file: Path, out: Path | None, options: RunOptions, formulations: li
             runs.append(_run(sim, options, []))
             if not options.quiet:
                 typer.echo(describe(runs[-1]))
+    phase(f"writing the comparison{' and overlay plots' if plots else ''}")
     with atomic_directory(out) as staging:
         write_comparison(runs, staging, f"{spec.name}: {', '.join(formulations)} ({options.runtime} runtime)",
                          plots=plots)
@@ -144,6 +147,8 @@ def _output_directory(out: Path | None, default: Path) -> Path:
 
 def _prepare(spec: Spec, options: RunOptions, formulation: str | None, stack: ExitStack) -> Simulation:
     work_dir = None
+    if options.runtime == "python":  # (the C runtime's bundle build announces its own phases)
+        building_controller(spec.name, formulation or spec.controller.formulation)
     if options.runtime == "c" and not options.cache:
         # Without the cache, the C bundle lives as long as the run that loads it.
         work_dir = stack.enter_context(tempfile.TemporaryDirectory(prefix="dcts-runtime-"))
@@ -152,6 +157,7 @@ def _prepare(spec: Spec, options: RunOptions, formulation: str | None, stack: Ex
 
 def _run(sim: Simulation, options: RunOptions, hooks: list[Hook]) -> RunResult:
     label = f"{sim.spec.name}: {sim.formulation} ({sim.runtime_kind})"
+    phase(f"simulating {label}: {sim.scenario.duration:g} s in {sim.scenario.steps} control steps")
     progress = ProgressBar(sim.scenario.steps, sim.scenario.period, label, enabled=not options.quiet)
     try:
         log = sim.run([*hooks, progress.hook()])
