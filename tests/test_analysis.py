@@ -10,16 +10,18 @@ import pinocchio as pin
 import pytest
 from reference import dynamics
 
-from dcts_spec.analysis.compare import markdown_table, table_rows
+from dcts_spec.analysis.compare import markdown_table, scaling_overlay, table_rows
 from dcts_spec.analysis.metrics import SUMMARY_KEYS, json_ready, summarize, summary_units
 from dcts_spec.analysis.report import describe
 from dcts_spec.files import OWNED, OutputFolderError
 from dcts_spec.limits.naming import row_text
 from dcts_spec.analysis.outputs import atomic_directory
+from dcts_spec.analysis.plots import external_torque_figure, joint_figure, task_error_figure
 from dcts_spec.analysis.run import RunResult
 from dcts_spec.analysis.series import TimeSeries, _kinetic_energies, evaluate
 from dcts_spec.sim.log import SimulationLog
 from dcts_spec.spec import load_spec_text
+from dcts_spec.tasks import make_task
 from dcts_spec.validate import validate_spec
 
 SPEC = """
@@ -148,13 +150,15 @@ def test_json_ready_and_tables(case) -> None:
     assert json_ready({"a": float("nan"), "b": [np.float64(1.5), float("inf")], 3: np.int64(2)}) == \
         {"a": None, "b": [1.5, None], "3": 2}
     spec, robot, log, series = case
-    runs = [RunResult(label, robot, log, series, {"min_scaling": value, "task_rms_error": {"reach": 0.5}},
+    units = {"min_scaling": "1", "task_rms_error": {"reach": "m"}}
+    runs = [RunResult(label, robot, log, series, {"min_scaling": value, "task_rms_error": {"reach": 0.5}, "units": units},
                       [1, 2, 3], {}) for label, value in (("dcts", 0.25), ("osc", None))]
-    rows = dict(table_rows(runs))
-    assert rows["min_scaling"] == [0.25, None] and rows["task_rms_error[reach]"] == [0.5, 0.5]
+    rows = {name: (unit, values) for name, unit, values in table_rows(runs)}
+    assert rows["min_scaling"] == ("1", [0.25, None]) and rows["task_rms_error[reach]"] == ("m", [0.5, 0.5])
     table = markdown_table(runs)
-    assert table.splitlines()[0] == "| metric | dcts | osc |"
-    assert "| min_scaling | 0.25 | – |" in table
+    assert table.splitlines()[0] == "| metric | unit | dcts | osc |"
+    assert "| min_scaling | 1 | 0.25 | – |" in table
+    assert "| task_rms_error[reach] | m | 0.5 | 0.5 |" in table
 
 
 def test_atomic_directory_replaces_its_own_files_and_keeps_the_users(tmp_path: Path) -> None:
@@ -217,7 +221,8 @@ def _summary(case, **changes):
     summary = summarize(log, series, robot, [1, 2, 3])
     summary |= {"spec": "metrics", "formulation": "dcts", "runtime": "python", "period": 0.002}
     summary["units"] = summary_units(summary, series, robot)
-    return RunResult("dcts", robot, log, series, summary, [1, 2, 3], {}), series
+    rows = {t.name: make_task(t, robot).row_names for t in spec.tasks}
+    return RunResult("dcts", robot, log, series, summary, [1, 2, 3], rows), series
 
 
 def _numbers(value) -> bool:
@@ -292,3 +297,40 @@ def test_relaxed_bounds_are_worded_as_validate_words_them() -> None:
     assert row_text(report.robot, "joint:joint2") == (
         f"{lim.q_min[1]:.4g} rad ≤ joint2 ≤ {lim.q_max[1]:.4g} rad, |joint2'| ≤ 1 rad/s")
     assert row_text(report.robot, "joint:nope") == "joint:nope"
+
+
+def test_plots_label_their_axes_and_keep_honest_scales(case) -> None:
+    steps = 40
+    rng = np.random.default_rng(1)
+    relaxed = np.zeros((steps, 2), dtype=bool)
+    relaxed[[5, 6], 0] = True
+    status = np.zeros(steps, dtype=np.int8)
+    status[[5, 6]] = 1
+    residual = 0.03 * rng.standard_normal((steps, 7))  # a model residual, no push
+    scaling = np.ones((steps, 3))
+    scaling[8:12, 1] = 0.5
+    run, _ = _summary(case, bound_names=["joint:joint1", "cartesian:tool.z"], relaxed=relaxed, status=status,
+                      tau_ext_measured=residual, scaling=scaling)
+
+    errors = task_error_figure(run).axes
+    assert [ax.get_ylabel() for ax in errors] == ["Δx [m]", "Δx [rad]", "Δx [rad]", "−ẋ [rad/s]"]
+    assert errors[3].get_title() == "rest — damping (velocity error)"
+    assert all("limits relaxed" in ax.get_legend_handles_labels()[1] for ax in errors)
+
+    positions = joint_figure(run, run.log.q, run.robot.limits.q_min, run.robot.limits.q_max, "q", "")
+    labels = [ax.get_legend_handles_labels()[1] for ax in positions.axes if ax.get_visible()]
+    assert labels[0] == ["bound relaxed"] and not any(labels[1:])  # joint1 only
+    assert positions.axes[1].get_ylabel() == "q [rad]"
+
+    torques = external_torque_figure(run).axes
+    low, high = torques[0].get_ylim()
+    assert low <= -1.0 and high >= 1.0  # 0.03 Nm stays small on the page
+    assert torques[0].get_title() == f"joint1 (estimate off by ≤ {np.abs(residual[1:, 0]).max():.2g} Nm)"
+
+    flat, _ = _summary(case, scaling=np.ones((steps, 3)))
+    flat.label = "osc"
+    overlay = scaling_overlay([run, flat]).axes
+    # Level 2 of the first run scaled: a line; the second run never did: a legend entry, no line.
+    assert [line.get_label() for line in overlay[1].lines if len(line.get_xdata())] == ["dcts"]
+    assert "osc: never scaled" in overlay[1].get_legend_handles_labels()[1]
+    assert overlay[0].get_legend_handles_labels()[1] == ["dcts: never scaled", "osc: never scaled"]

@@ -463,7 +463,7 @@ def test_compare_writes_tables_and_overlays(tmp_path: Path) -> None:
     table = json.loads((out / "comparison.json").read_text())
     assert set(table) == {"dcts", "osc"}
     markdown = (out / "comparison.md").read_text()
-    assert "| metric | dcts | osc |" in markdown and "task_rms_error[hold]" in markdown
+    assert "| metric | unit | dcts | osc |" in markdown and "| task_rms_error[hold] | m |" in markdown
     for name in ("compare_task_errors", "compare_scalings", "compare_energies", "compare_joint_velocities",
                  "compare_end_effector_path"):
         assert (out / f"{name}.png").is_file()

@@ -11,20 +11,26 @@ from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
 from ..controller import STATUS_LIMITS_RELAXED
+from ..limits.naming import cartesian_row_name, joint_row_name, joint_unit
 from .run import RunResult
+from .units import per
 
 LIMIT_COLOR = "#d62728"
+RELAXED_COLOR = "#ff7f0e"
 DPI = 110
 PROJECTIONS = ((0, 1), (0, 2), (1, 2))  # x-y, x-z, y-z
+# The external-torque axes span at least ±this: a model residual of a few hundredths of a Nm
+# stays a flat line near 0 instead of being blown up to the height of a push.
+MIN_TORQUE_RANGE = 1.0  # Nm (N for a prismatic joint)
 
 
 def write_plots(run: RunResult, directory: Path) -> list[Path]:
     """Every plot of a run, as PNG files in `directory`; returns their paths."""
     log, lim = run.log, run.robot.limits
     figures = {
-        "joint_positions": joint_figure(run, log.q, lim.q_min, lim.q_max, "q", "rad"),
-        "joint_velocities": joint_figure(run, log.dq, -lim.v_max, lim.v_max, "q̇", "rad/s"),
-        "torques": joint_figure(run, log.tau, -lim.tau_max, lim.tau_max, "τ", "Nm"),
+        "joint_positions": joint_figure(run, log.q, lim.q_min, lim.q_max, "q", ""),
+        "joint_velocities": joint_figure(run, log.dq, -lim.v_max, lim.v_max, "q̇", "s"),
+        "torques": joint_figure(run, log.tau, -lim.tau_max, lim.tau_max, "τ", None),
         "external_torques": external_torque_figure(run),
         "task_errors": task_error_figure(run),
         "scalings": scaling_figure(run),
@@ -71,29 +77,78 @@ def shade_limits(ax: Axes, lower: float, upper: float, values: np.ndarray) -> No
     ax.set_ylim(bottom, top)
 
 
+def joint_quantity_unit(run: RunResult, j: int, per_time: str | None) -> str:
+    """Joint j's unit of position (per_time ""), of its rate (per_time "s"), or of force (None)."""
+    unit = joint_unit(run.robot, j)
+    if per_time is None:
+        return "Nm" if unit == "rad" else "N"
+    return per(unit, per_time) if per_time else unit
+
+
+def mark_steps(ax: Axes, time: np.ndarray, mask: np.ndarray, label: str, color: str = RELAXED_COLOR) -> None:
+    """Ticks along the bottom of the axes at the steps in `mask` (nothing if there are none)."""
+    if mask.any():
+        ax.plot(time[mask], np.full(int(mask.sum()), 0.03), "|", ms=7, color=color, label=label,
+                transform=ax.get_xaxis_transform())
+
+
+def relaxed_steps(run: RunResult, row_name: str) -> np.ndarray:
+    """The steps at which the bound `row_name` gave way (none if the controller has no such row)."""
+    log = run.log
+    if row_name not in log.bound_names:
+        return np.zeros(log.steps, dtype=bool)
+    return log.relaxed[:, log.bound_names.index(row_name)]
+
+
 def joint_figure(run: RunResult, values: np.ndarray, lower: np.ndarray, upper: np.ndarray,
-                 symbol: str, unit: str) -> Figure:
+                 symbol: str, per_time: str | None) -> Figure:
+    """One axes per joint with its limits shaded and the steps its bound gave way marked;
+    `per_time` as in `joint_quantity_unit`."""
     names = run.robot.joint_names
     figure, axes = joint_grid(len(names), f"{symbol} per joint, limits shaded — {run.label}")
     for j, ax in enumerate(axes):
         ax.plot(run.log.time, values[:, j], lw=1.0)
         shade_limits(ax, lower[j], upper[j], values[:, j])
-        ax.set_ylabel(f"{symbol} [{unit}]")
+        ax.set_ylabel(f"{symbol} [{joint_quantity_unit(run, j, per_time)}]")
         ax.set_title(names[j], fontsize=9)
+        mark_steps(ax, run.log.time, relaxed_steps(run, joint_row_name(names[j])), "bound relaxed")
+        if ax.get_legend_handles_labels()[0]:
+            ax.legend(fontsize=7)
     return figure
 
 
 def external_torque_figure(run: RunResult) -> Figure:
-    names = run.robot.joint_names
-    title = f"external joint torque: applied disturbance vs controller input — {run.label}"
+    """Applied external torque (disturbances and the payloads the controller does not know) and
+    the controller's τ_ext input, each joint on a scale of at least ±MIN_TORQUE_RANGE; the title
+    gives how far the input was off (one step late, see metrics)."""
+    names, t = run.robot.joint_names, run.log.time
+    applied = run.log.tau_ext_true + run.series.payload_torque
+    measured = run.log.tau_ext_measured
+    title = f"external joint torque: applied (disturbances, payloads) vs the τ_ext estimate (the controller input) — {run.label}"
     figure, axes = joint_grid(len(names), title)
     for j, ax in enumerate(axes):
-        ax.plot(run.log.time, run.log.tau_ext_true[:, j], lw=1.0, label="disturbance")
-        ax.plot(run.log.time, run.log.tau_ext_measured[:, j], lw=1.0, ls="--", label="measured")
-        ax.set_ylabel("τ_ext [Nm]")
-        ax.set_title(names[j], fontsize=9)
+        ax.plot(t, applied[:, j], lw=1.0, label="applied")
+        if np.any(run.series.payload_torque[:, j]):
+            ax.plot(t, run.series.payload_torque[:, j], lw=0.8, ls=":", label="of which payloads")
+        ax.plot(t, measured[:, j], lw=1.0, ls="--", label="estimate (controller input)")
+        ax.axhline(0.0, color="0.6", lw=0.5)
+        both = np.concatenate([applied[:, j], measured[:, j]])
+        ax.set_ylim(min(1.08 * float(np.min(both, initial=0.0)), -MIN_TORQUE_RANGE),
+                    max(1.08 * float(np.max(both, initial=0.0)), MIN_TORQUE_RANGE))
+        unit = joint_quantity_unit(run, j, None)
+        off = float(np.max(np.abs(measured[1:, j] - applied[:-1, j]), initial=0.0))
+        ax.set_ylabel(f"τ_ext [{unit}]")
+        ax.set_title(f"{names[j]} (estimate off by ≤ {off:.2g} {unit})", fontsize=9)
     axes[0].legend(fontsize=8)
     return figure
+
+
+def task_error_label(run: RunResult, name: str, symbol: str = "Δx", damping_symbol: str = "−ẋ") -> tuple[str, str]:
+    """(title, y label) of a task's error axes: a damping task's is its velocity error."""
+    unit = run.series.task_units[name]
+    if name in run.series.damping:
+        return f"{name} — damping (velocity error)", f"{damping_symbol} [{unit}]"
+    return name, f"{symbol} [{unit}]"
 
 
 def task_error_figure(run: RunResult) -> Figure:
@@ -101,14 +156,18 @@ def task_error_figure(run: RunResult) -> Figure:
     rows = max(len(errors), 1)
     figure = Figure(figsize=(9, 2.2 * rows + 0.6), layout="constrained")
     axes = figure.subplots(rows, 1, sharex=True, squeeze=False)[:, 0]
-    figure.suptitle(f"task errors Δx — {run.label}")
+    figure.suptitle(f"task errors Δx (pure damping tasks: velocity error) — {run.label}")
     if not errors:
         axes[0].text(0.5, 0.5, "no task has a reference", ha="center", va="center", transform=axes[0].transAxes)
+    relaxed = run.log.status == STATUS_LIMITS_RELAXED
     for ax, (name, error) in zip(axes, errors.items()):  # one axes even without errors
         for i, row in enumerate(run.row_names[name]):
             ax.plot(run.log.time, error[:, i], lw=1.0, label=row)
-        ax.set_title(name, fontsize=9)
-        ax.legend(fontsize=7, ncol=min(error.shape[1], 4))
+        title, ylabel = task_error_label(run, name)
+        ax.set_title(title, fontsize=9)
+        ax.set_ylabel(ylabel)
+        mark_steps(ax, run.log.time, relaxed, "limits relaxed")
+        ax.legend(fontsize=7, ncol=min(error.shape[1] + 1, 4))
     axes[-1].set_xlabel("time [s]")
     return figure
 
@@ -117,15 +176,14 @@ def scaling_figure(run: RunResult) -> Figure:
     figure = Figure(figsize=(9, 3.2), layout="constrained")
     ax = figure.subplots()
     for i, p in enumerate(run.priorities):
-        ax.plot(run.log.time, run.log.scaling[:, i], lw=1.0, label=f"priority {p}")
+        never = " (never scaled)" if np.all(run.log.scaling[:, i] >= 1.0) else ""
+        ax.plot(run.log.time, run.log.scaling[:, i], lw=1.0, label=f"priority {p}{never}")
     status = run.log.status
-    for mask, color, label in ((status < 0, LIMIT_COLOR, "fallback torque"),
-                               (status == STATUS_LIMITS_RELAXED, "#ff7f0e", "limits relaxed")):
-        if mask.any():
-            ax.plot(run.log.time[mask], np.full(mask.sum(), -0.05), "|", color=color, label=label)
+    mark_steps(ax, run.log.time, status < 0, "fallback torque", LIMIT_COLOR)
+    mark_steps(ax, run.log.time, status == STATUS_LIMITS_RELAXED, "limits relaxed")
     ax.set_ylim(-0.1, 1.1)
     ax.set_xlabel("time [s]")
-    ax.set_ylabel("task scaling s")
+    ax.set_ylabel("task scaling s [1]")
     ax.set_title(f"task scalings (1 = executed fully) — {run.label}")
     ax.legend(fontsize=8)
     return figure
@@ -168,6 +226,12 @@ def path_figure(runs: Sequence[RunResult]) -> Figure:
             if first.waypoint_frame == frame and first.waypoint_positions is not None:
                 w = first.waypoint_positions
                 ax.plot(w[:, a], w[:, b], "s", ms=4, color="k", mfc="none", label="waypoints")
+            for run in runs:
+                relaxed = _frame_relaxed(run, frame)
+                if relaxed.any():
+                    p = run.series.frame_positions[frame][relaxed]
+                    ax.plot(p[:, a], p[:, b], ".", ms=3, color=RELAXED_COLOR,
+                            label="bound relaxed" if len(runs) == 1 else f"{run.label}: bound relaxed")
             for bound in first.robot.cartesian_bounds:
                 if bound.frame == frame and bound.axis in (a, b):
                     draw = ax.axvline if bound.axis == a else ax.axhline
@@ -183,6 +247,15 @@ def path_figure(runs: Sequence[RunResult]) -> Figure:
             ax.set_title(f"{frame}: {'xyz'[a]}-{'xyz'[b]}", fontsize=9)
         row[0].legend(fontsize=8)
     return figure
+
+
+def _frame_relaxed(run: RunResult, frame: str) -> np.ndarray:
+    """The steps at which a Cartesian bound of `frame` gave way."""
+    mask = np.zeros(run.log.steps, dtype=bool)
+    for bound in run.robot.cartesian_bounds:
+        if bound.frame == frame:
+            mask |= relaxed_steps(run, cartesian_row_name(bound))
+    return mask
 
 
 def _view_box(points: np.ndarray) -> tuple[np.ndarray, float]:

@@ -46,7 +46,7 @@ def describe(run: RunResult) -> str:
     lines.append(f"  tasks      RMS error (final): {task_errors_text(s)}")
     lines.append(f"             priority-1 mean acceleration error {q('primary_mean_acceleration_error')}")
     lines.append(f"  external   disturbance torque up to {q('max_disturbance_torque')} (payloads included), "
-                 f"the controller's τ_ext off by up to {q('max_external_torque_estimate_error')}")
+                 f"the τ_ext estimate off by up to {q('max_external_torque_estimate_error')}")
     lines.append(f"  energy     ∫acceleration energy {q('acceleration_energy_integral')}, kinetic peaks: "
                  f"task {q('task_space_kinetic_energy_peak')}, null space {q('null_space_kinetic_energy_peak')}")
     if s["waypoints_total"]:

@@ -40,14 +40,22 @@ def joint_unit(robot: Robot, j: int) -> str:
     return "m" if kind.startswith("JointModelP") else "rad"
 
 
+def joint_row_name(joint: str) -> str:
+    """The name of a joint's bound row (limits/joint.py), as logs and summary.json key it."""
+    return f"joint:{joint}"
+
+
+def cartesian_row_name(b: CartesianBound) -> str:
+    """The name of a Cartesian bound's row (limits/cartesian.py)."""
+    return f"cartesian:{b.frame}.{b.label}"
+
+
 def row_text(robot: Robot, row_name: str) -> str:
-    """The bound behind a row name (`joint:<joint>`, `cartesian:<frame>.<label>`), as text;
-    the name itself for a row this robot does not have."""
-    kind, _, what = row_name.partition(":")
-    if kind == "joint" and what in robot.joint_names:
-        return joint_bound_text(robot, robot.joint_names.index(what))
-    if kind == "cartesian":
-        for b in robot.cartesian_bounds:
-            if f"{b.frame}.{b.label}" == what:
-                return bound_text(b)
+    """The bound behind a row name, as text; the name itself for a row this robot does not have."""
+    for j, joint in enumerate(robot.joint_names):
+        if joint_row_name(joint) == row_name:
+            return joint_bound_text(robot, j)
+    for b in robot.cartesian_bounds:
+        if cartesian_row_name(b) == row_name:
+            return bound_text(b)
     return row_name
