@@ -163,7 +163,7 @@ def test_c_agrees_with_python_on_1000_states(built, three_levels_spec):
     controller = build_controller(three_levels_spec)
     compiled.reset()
     states = StateSampler(controller, seed=11).mixed(1000, limit_fraction=0.2)
-    differences, statuses = [], {}
+    differences, relaxed, statuses = [], [], {}
     for s in states:
         a = controller.step(s.q, s.dq, s.tau_ext, s.ref)
         b = compiled.step(s.q, s.dq, s.tau_ext, s.ref)
@@ -171,9 +171,14 @@ def test_c_agrees_with_python_on_1000_states(built, three_levels_spec):
         statuses[a.status] = statuses.get(a.status, 0) + 1
         for u, v in ((a.tau, b.tau), (a.ddq, b.ddq), (a.scaling, b.scaling), (a.x, b.x)):
             assert u.shape == v.shape
-        differences.append(max(relative_difference(u, v) for u, v in ((a.tau, b.tau), (a.ddq, b.ddq), (a.scaling, b.scaling), (a.x, b.x))))
-    # the two DAQP builds agree to round-off, except where a level is barely infeasible unscaled
-    # (one runtime scales it, the other bends it by ~1e-7): the golden tolerance (test.c.in)
+        difference = max(relative_difference(u, v) for u, v in ((a.tau, b.tau), (a.ddq, b.ddq), (a.scaling, b.scaling), (a.x, b.x)))
+        (relaxed if a.status == 1 else differences).append(difference)
+    # the two runtimes agree to round-off, except where a level is barely infeasible unscaled
+    # (one runtime scales it, the other bends it by ~1e-7): the golden tolerance (test.c.in).
+    # A relaxed step's least total violation (L1) need not be unique, and the C runtime's warm-
+    # started DAQP may end at another minimizer than the Python runtime's cold one: the golden
+    # relaxed tolerance.
+    assert max(relaxed, default=0.0) <= 1e-3, max(relaxed)
     differences = np.array(differences)
     assert differences.max() <= 1e-6, differences.max()
     assert np.count_nonzero(differences > 1e-8) <= 10, np.sort(differences)[-12:]

@@ -416,7 +416,7 @@ def generate_sources(
     if any(list(b) != list(range(b[0], b[0] + len(b))) for b in bends) or any(
             a[-1] + 1 != b[0] for a, b in zip(bends, bends[1:])):
         raise CodegenError("the C cascade expects each level's bend in consecutive variables")
-    solver_bytes = SOLVER_STORAGE_BYTES * (2 if nr else 1)
+    solver_bytes = SOLVER_STORAGE_BYTES * (3 if nr else 2)  # see C_SOLVERS in controller.c.in
     tau_max = np.asarray(controller.tau_max, dtype=float)
     damping = controller.problem.vector("fallback_damping")
     digest = spec_digest(spec, spec_bytes)

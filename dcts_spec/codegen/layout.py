@@ -98,12 +98,16 @@ def workspace_fields(nq: int, nref: int, nx: int, na: int, nlevels: int, casadi_
         ("direction", "double", nx2, ""),
         ("trial", "double", nx2, ""),
         ("previous", "double", nx2, ""),
-        ("Hq", "double", nxa * nxa, "DAQP's arrays of the QP"),
-        ("fq", "double", nxa, ""),
-        ("lo", "double", nc, ""),
+        ("lo", "double", nc, "DAQP's arrays of the QP (its H and f are the QP data's)"),
         ("hi", "double", nc, ""),
         ("sense", "int", nc, ""),
         ("xq", "double", nxa, ""),
+        ("Hd", "double", nxa * nxa, "DAQP's arrays of the cascade's stages (diagonal H, the same A)"),
+        ("fd", "double", nxa, ""),
+        ("lod", "double", nc, ""),
+        ("hid", "double", nc, ""),
+        ("sensed", "int", nc, ""),
+        ("xd", "double", nxa, ""),
         ("A2", "double", n["na2"] * nx2, "the relaxation: one slack per bound row"),
         ("lba2", "double", n["na2"], ""),
         ("uba2", "double", n["na2"], ""),
@@ -124,6 +128,7 @@ def workspace_fields(nq: int, nref: int, nx: int, na: int, nlevels: int, casadi_
         ("dq_finite", "double", nq, ""),
         ("fallback", "double", nq, ""),
         ("have_last_q", "int", 0, ""),
+        ("refactor", "int", 3, "a DAQP state's H or A changed since it factored them"),
     ]
 
 

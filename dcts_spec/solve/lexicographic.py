@@ -202,7 +202,8 @@ class Cascade:
             if witness is None or i > start:  # (the first level to scale may be solved already)
                 free_lo, free_hi = lbx.copy(), ubx.copy()
                 lbx[bend] = ubx[bend] = 0.0
-                x = self.scale(i, lbx, ubx)
+                # with every level above nominal, _first_to_scale found this stage infeasible
+                x = None if i > 0 and self._nominal_through(i, lbx, ubx) else self.scale(i, lbx, ubx)
                 if x is None:
                     x = self.bend(i, free_lo, free_hi)
                     if x is None:  # infeasible: only possible for the first level, else DAQP failed
@@ -215,12 +216,20 @@ class Cascade:
             # ill-conditioned states they gain far more than its width (a bend 40 % smaller for a
             # band of 1e-7, measured); DAQP takes fixed variables as equalities
             lbx[s] = ubx[s] = min(max(witness[s], self.lbx[s]), self.ubx[s])
-            if i + 1 < count:
-                x = self.final(i + 1, lbx, ubx)
-                if x is not None:
-                    return x
-        x = self.final(count, lbx, ubx)
-        return witness if x is None else x
+            if self._nominal_through(i + 1, lbx, ubx):
+                continue  # every level so far nominal: the first QP, which was infeasible
+            x = self.final(i + 1, lbx, ubx)
+            if x is not None:
+                return x
+        return witness
+
+    def _nominal_through(self, upto: int, lbx, ubx) -> bool:
+        """Are the levels [0, upto) fixed at their nominal values (s = 1, δ = 0)?"""
+        for s, bend in self.structure.priorities[:upto]:
+            bend = list(bend)
+            if not (lbx[s] == ubx[s] == self.nominal[s] and np.all(lbx[bend] == 0.0) and np.all(ubx[bend] == 0.0)):
+                return False
+        return True
 
     def _first_to_scale(self) -> tuple[int, np.ndarray, np.ndarray, np.ndarray | None]:
         """The lowest level i that can be scaled (δᵢ = 0) with every level above it met: then
