@@ -1,4 +1,4 @@
-"""The `dcts` command line: validate, schema, compile, bench, simulate, compare.
+"""The `dcts` command line: validate, schema, compile, bench, simulate, compare, robots, describe, init.
 
 Conventions shared by every command (see EPILOG): `-o/--out` names what a command writes, with
 one default rule; flags take no value; bad option values are usage errors (exit 2), bad specs
@@ -312,6 +312,78 @@ def bench(
               "in Python, Pinocchio's terms and an instruction count")
         result = run_bench(file, formulation=formulation, states=states, python_states=python_states)
     typer.echo(json.dumps(result, indent=2) if as_json else format_report(result))
+
+
+@command()
+def robots(as_json: JsonOption = False) -> None:
+    """List the built-in robots (for a spec's `robot: {model: NAME}`)."""
+    from .robot.builtin import BUILTIN_ROBOTS
+    from .robot.describe import DescribeError, describe
+
+    found = []
+    for name in BUILTIN_ROBOTS:
+        try:
+            found.append(describe(name))
+        except DescribeError as error:  # (the Panda comes with example-robot-data)
+            typer.echo(f"warning: {name}: {error}", err=True)
+    if as_json:
+        typer.echo(json.dumps([{k: r.to_dict()[k] for k in ("name", "dof", "mass", "tool_frame", "urdf",
+                                                           "locked_joints")} for r in found], indent=2))
+        return
+    for r in found:
+        locked = f", {len(r.locked_joints)} locked" if r.locked_joints else ""
+        typer.echo(f"{r.name:<8} {len(r.joints)} joints{locked}, {r.mass:.3g} kg, tool frame {r.tool_frame!r}  "
+                   f"({r.urdf})")
+    typer.echo("`dcts describe NAME` lists a robot's joints, limits, frames and links; "
+               "`dcts init FILE --robot NAME` writes a spec for it.")
+
+
+@command()
+def describe(
+    robots: Annotated[list[str], typer.Argument(metavar="ROBOT|URDF|SPEC",
+                                                help="a built-in robot, a URDF file or a spec file (its robot)")],
+    as_json: Annotated[bool, typer.Option("--json", help="machine-readable output: a list, one robot per "
+                                          "argument, SI units")] = False,
+) -> None:
+    """A robot's joints with position, velocity and torque limits, its frames, and its links with masses."""
+    from .robot.describe import DescribeError
+    from .robot.describe import describe as describe_robot
+
+    found, failed = [], False
+    for target in robots:
+        try:
+            found.append(describe_robot(target))
+        except SpecError as error:
+            typer.echo(str(error), err=True)
+            failed = True
+        except DescribeError as error:
+            typer.echo(f"error: {error}", err=True)
+            failed = True
+    if as_json:
+        typer.echo(json.dumps([r.to_dict() for r in found], indent=2))
+    elif found:
+        typer.echo("\n\n".join(r.text() for r in found))
+    raise typer.Exit(1 if failed else 0)
+
+
+@command()
+def init(
+    file: Annotated[Path, typer.Argument(help="the spec file to write (never overwritten)")],
+    robot: Annotated[str, typer.Option(help="a built-in robot (see `dcts robots`) or a URDF file")] = "iiwa14",
+) -> None:
+    """Write a commented spec to start from: the robot holds its tool at a point; it validates and simulates."""
+    from .robot.describe import DescribeError
+    from .starter import InitError, write_starter
+
+    try:
+        name = write_starter(file, robot)
+    except SpecError as error:
+        typer.echo(str(error), err=True)
+        raise typer.Exit(1) from None
+    except (InitError, DescribeError) as error:
+        typer.echo(f"error: {error}", err=True)
+        raise typer.Exit(1) from None
+    typer.echo(f"wrote {file} (spec {name!r}, robot {robot}); next: dcts validate {file}, dcts simulate {file}")
 
 
 def main() -> None:
