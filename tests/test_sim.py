@@ -222,6 +222,93 @@ def test_waypoints_are_fed_in_turn_and_their_times_recorded() -> None:
     np.testing.assert_allclose(log.ref[-1], points[-1])
 
 
+def _feedforward_case() -> Simulation:
+    """A tool path to a point 0.1 m away at up to 0.4 m/s, then 2 cm on, fed with feed-forward."""
+    tasks = """
+  - {name: reach, type: position, frame: tool, priority: 1, gains: {kp: 400, kd: 40, max_velocity: 0.4}, reference: {input: true, feedforward: true}}
+  - {name: damping, type: joint, priority: 2, gains: {kp: 0, kd: 5}}"""
+    points = [[0.69, 0.1, 0.51], [0.67, 0.1, 0.5]]
+    scenario = f"  duration: 0.85\n  waypoints: {{task: reach, tolerance: 0.002, points: {points}}}\n"
+    return prepare_simulation(load_spec_text(spec_text(scenario, tasks)), "python")
+
+
+def _ref_field(sim: Simulation, log, task: str, field: str) -> np.ndarray:
+    entry = next(r for r in sim.runtime.ref_layout if r.task == task and r.field == field)
+    return log.ref[:, entry.offset: entry.offset + entry.size]
+
+
+class _WithoutFeedForward:
+    """The same runtime with the velocity and acceleration inputs zeroed: the path alone."""
+
+    def __init__(self, inner):
+        self.inner, self.n, self.ref_layout, self.priorities = inner, inner.n, inner.ref_layout, inner.priorities
+        self.cut = np.concatenate([np.arange(r.offset, r.offset + r.size) for r in inner.ref_layout
+                                   if r.field in ("velocity", "acceleration")])
+
+    def step(self, q, dq, tau_ext=None, ref=None) -> StepResult:
+        ref = ref.copy()
+        ref[self.cut] = 0.0
+        return self.inner.step(q, dq, tau_ext, ref)
+
+
+def test_feedforward_waypoints_are_a_smooth_timed_path_tracked_closely() -> None:
+    sim = _feedforward_case()
+    log = sim.run()
+    p, v, a = (_ref_field(sim, log, "reach", f) for f in ("position", "velocity", "acceleration"))
+    period = sim.scenario.period
+    # The fed velocity and acceleration are the time derivatives of the fed position (central
+    # differences; the acceleration's jerk jumps where a segment starts or ends).
+    np.testing.assert_allclose(v, np.gradient(p, period, axis=0), atol=1e-4)
+    np.testing.assert_allclose(a, np.gradient(v, period, axis=0), atol=0.02 * np.abs(a).max())
+    speed = np.linalg.norm(v, axis=1)
+    assert 0.99 * 0.4 < speed.max() <= 0.4 + 1e-9  # max_velocity sets the segments' durations
+    np.testing.assert_allclose(p[0], analyze(sim, log).series.frame_positions["tool"][0], atol=1e-12)  # from where it is
+    times = log.waypoint_times
+    assert np.all(np.isfinite(times))
+    assert times[0] == pytest.approx(15 / 8 * np.linalg.norm(np.array([0.69, 0.1, 0.51]) - p[0]) / 0.4, abs=0.003)
+    assert times[1] - times[0] == pytest.approx(2 * np.pi / np.sqrt(400), abs=0.003)  # a short hop: the PD's period
+    assert speed[round(times[0] / period)] < 1e-3 and np.all(speed[round(times[1] / period):] == 0.0)  # at rest there
+
+    # The same path with the velocity and acceleration inputs zeroed lags far behind it (first
+    # segment: 0.47 s).
+    without = Simulation(sim.spec, sim.robot, sim.scenario.with_duration(0.47), _WithoutFeedForward(sim.runtime))
+    lag = np.linalg.norm(analyze(without, without.run()).series.task_errors["reach"], axis=1)
+    error = np.linalg.norm(analyze(sim, log).series.task_errors["reach"][:lag.size], axis=1)
+    assert np.sqrt(np.mean(error**2)) < 0.01 * np.sqrt(np.mean(lag**2)) and lag.max() > 0.02  # m
+
+
+def test_feedforward_of_an_orientation_path_is_in_the_tasks_own_rows() -> None:
+    """A swing task ([rx, ry]: the frame's own axes): the fed rates are the time derivatives of
+    the task's error towards the fed rpy, at a fixed configuration."""
+    tasks = """
+  - {name: turn, type: orientation, frame: tool, axes: [rx, ry], priority: 1, gains: {kp: 400, kd: 40}, reference: {input: true, feedforward: true}}"""
+    scenario = "  duration: 1.0\n  waypoints: {task: turn, tolerance: 0.001, points: [[2.9, 0.2, -2.8]]}\n"
+    sim = prepare_simulation(load_spec_text(spec_text(scenario, tasks)), "python")
+    follower, q = sim.waypoints, sim.scenario.q0
+    ref = sim.initial_ref.copy()
+    follower.restart(ref)
+    task, period = follower.task, 1e-3
+    model, data = sim.robot.model, sim.robot.model.createData()
+    pin.framesForwardKinematics(model, data, q)
+    placement = data.oMf[model.getFrameId("tool")]
+    layout = {r.field: r for r in sim.runtime.ref_layout}
+
+    def fed(t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        follower.update(t, q, ref)
+        return tuple(ref[layout[f].offset: layout[f].offset + layout[f].size].copy()
+                     for f in ("rpy", "velocity", "acceleration"))
+
+    def error(rpy: np.ndarray) -> np.ndarray:
+        return task.numeric_error(placement.translation, placement.rotation, {"rpy": rpy})
+
+    for t in (0.05, 0.12, 0.2):
+        _, velocity, acceleration = fed(t)
+        before, after, now = error(fed(t - period)[0]), error(fed(t + period)[0]), error(fed(t)[0])
+        np.testing.assert_allclose(velocity, (after - before) / (2 * period), rtol=1e-3, atol=1e-6)
+        np.testing.assert_allclose(acceleration, (after - 2 * now + before) / period**2, rtol=1e-2, atol=1e-3)
+        assert np.linalg.norm(velocity) > 0.1
+
+
 def test_input_references_without_waypoints_hold_their_initial_value() -> None:
     tasks = """
   - {name: reach, type: pose, frame: tool, axes: [x, y, z, rx], priority: 1, gains: {kp: 100, kd: 20}, reference: {input: true}}
