@@ -13,6 +13,7 @@ from .robot.model import Robot
 from .robot.resolve import resolve_robot
 from .spec import Diagnostic, Spec, SpecError, load_spec
 from .spec.errors import did_you_mean
+from .spec.tasks import TaskSpec
 from .spec.types import size_of
 from .spec.units import to_si
 from .tasks import CartesianTask, JointTask, make_task, task_dimension, task_joints
@@ -286,12 +287,21 @@ def _check_waypoints(spec: Spec, robot: Robot) -> list[Diagnostic]:
     task = spec.tasks[names.index(wp.task)]
     if task.reference is None or not task.reference.input:
         return [src.diagnostic(at + ("task",), f"task {wp.task!r} needs `reference: {{input: true}}` to follow waypoints")]
+    if not _task_resolves(task, robot):
+        return []  # the task's unknown frame or joint is reported; the size of its reference is unknown
     size = sum(f[1] for f in make_task(task, robot).reference_fields())
     return [
         src.diagnostic(at + ("points", i), f"{len(p)} values, but task {wp.task!r} takes a reference of {size}")
         for i, p in enumerate(wp.points)
         if len(p) != size
     ]
+
+
+def _task_resolves(task: TaskSpec, robot: Robot) -> bool:
+    """Whether a task's frame or joints are the robot's (else `_check_tasks` reports them)."""
+    if task.type != "joint":
+        return task.frame is not None and robot.has_frame(task.frame)
+    return all(j in robot.joint_names for j in task_joints(task, robot))
 
 
 def _levels(spec: Spec, robot: Robot, q: np.ndarray) -> tuple[list[LevelReport], list[Diagnostic]]:

@@ -130,7 +130,7 @@ scenario:
 @pytest.mark.parametrize(
     ("text", "expected"),
     [
-        (SEVERAL_STRUCTURAL, {4: "did you mean 'model'", 6: "'qp' is not allowed", 12: "kd must be ≥ 0", 16: "'degrees'"}),
+        (SEVERAL_STRUCTURAL, {4: "did you mean 'model'", 6: "'qp' is not allowed", 12: "must be ≥ 0 and ≤ 1e5 1/s, got -20", 16: "'degrees'"}),
         (SEVERAL_SEMANTIC, {8: "no frame 'tool0'", 14: "no joint 'joint9'", 19: "3 values for 7 joints", 21: "no frame 'gripper'"}),
     ],
     ids=["structural", "semantic"],

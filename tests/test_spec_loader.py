@@ -3,13 +3,15 @@
 from __future__ import annotations
 
 import math
+import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from dcts_spec.spec import Diagnostic, SpecError, load_spec, load_spec_text
-from dcts_spec.spec.errors import did_you_mean, format_path
-from dcts_spec.spec.source import read_yaml, read_yaml_file
+from dcts_spec.spec.errors import MAX_DIAGNOSTICS, did_you_mean, format_path
+from dcts_spec.spec.source import MAX_BYTES, read_yaml, read_yaml_file
 from dcts_spec.spec.types import as_list, size_of
 from dcts_spec.spec.units import to_si
 
@@ -115,10 +117,13 @@ def test_unreadable_yaml_is_one_located_error(text: str, line: int, message: str
 
 
 def test_yaml_scalars() -> None:
-    data, _ = read_yaml("a: [1e6, 1.0e-3, -2.5E+2, 1.5, 10, 0.5]\nb: yes\nc: '1e6'\nd: 1e\ne: ~\n", "f.yaml")
+    data, _ = read_yaml("a: [1e6, 1.0e-3, -2.5E+2, 1.5, 10, 0.5]\nb: yes\nc: '1e6'\nd: 1e\ne: ~\n"
+                        "f: [true, False, on, off, no]\ng: 2001-12-14\n", "f.yaml")
     assert data["a"] == [1e6, 1e-3, -250.0, 1.5, 10, 0.5]
     assert isinstance(data["a"][0], float) and isinstance(data["a"][4], int)
-    assert data["b"] is True  # YAML 1.1
+    assert data["b"] == "yes"  # YAML 1.2: only true and false are booleans
+    assert data["f"] == [True, False, "on", "off", "no"]
+    assert data["g"] == "2001-12-14"  # no dates: a spec has none
     assert data["c"] == "1e6" and data["d"] == "1e" and data["e"] is None
 
 
@@ -137,6 +142,158 @@ def test_read_yaml_file(tmp_path: Path) -> None:
     path.write_bytes(b"a: \xff\xfe\n")
     with pytest.raises(SpecError, match="cannot read"):
         read_yaml_file(path)
+
+
+# --- input that must not hang, crash or flood: one located error, fast ---------------------------------
+
+
+def _one_error(text: str) -> Diagnostic:
+    """The single error of reading `text`, which must come within a second."""
+    start = time.perf_counter()
+    with pytest.raises(SpecError) as caught:
+        load_spec_text(text, "f.yaml")
+    assert time.perf_counter() - start < 1.0, "bad input must be refused fast"
+    (d,) = caught.value.errors
+    assert d.file == "f.yaml" and d.line is not None and d.column is not None
+    return d
+
+
+@pytest.mark.parametrize(
+    ("text", "line", "column", "message"),
+    [
+        ("a: &a [1, *a]\n", 1, 11, "alias *a refers to a value that contains it"),
+        ("a: &a {b: {c: *a}}\n", 1, 15, "recursive alias"),
+        ("a: *nowhere\n", 1, 4, "names no anchor"),
+        ("a: &a [x, x, x, x, x, x, x, x, x, x]\n" + "".join(f"{c}: &{c} [{', '.join(['*' + p] * 10)}]\n"
+                                                       for p, c in zip("abcd", "bcde")), 4, 36, "alias *c is expanded"),
+        ("a: " + "[" * 500 + "]" * 500 + "\n", 1, 35, "nested deeper than 32 levels"),  # at the 32nd [
+        ("a:\n" + "".join("  " * i + f"k{i}:\n" for i in range(1, 40)), 32, 63, "nested deeper than 32 levels"),
+        ("a: [" + ", ".join(["0"] * 100_000) + "]\n", 1, 29_996, "more than 10000 values"),  # at the 9,999th 0
+        ("version: " + "9" * 400 + "\n", 1, 10, "a whole number of 400 characters"),
+        ("version: " + "9" * 5000 + "\n", 1, 10, "a whole number of 5000 characters"),
+        ("version: !!timestamp 2001-13-45\n", 1, 10, "invalid YAML value: month must be in 1..12"),
+        ("version: !!int x\n", 1, 10, "invalid YAML value"),
+        ("a: 1\n? [1, 2]\n: 3\n", 2, 3, "keys must be text, got a sequence"),
+        ("a: 1\nb: 'x\0y'\n", 2, 6, "U+0000 is not allowed"),
+        ("a: 1\nb:\n  - c\x07\n", 3, 6, "U+0007 is not allowed"),
+    ],
+    ids=["recursive-alias", "recursive-alias-deep", "undefined-alias", "alias-bomb", "500-deep", "40-deep-mapping",
+         "100k-list", "400-digits", "5000-digits", "bad-date", "bad-int-tag", "list-key", "nul", "bell"],
+)
+def test_hostile_yaml_is_one_located_error(text: str, line: int, column: int, message: str) -> None:
+    d = _one_error(text)
+    assert (d.line, d.column) == (line, column) and message in d.message, str(d)
+
+
+@pytest.mark.parametrize(("value", "message"), [
+    ("yes", "'yes' is not allowed; allowed: 1"), ("true", "expected the number 1, got true"),
+    ("2001-13-45", "'2001-13-45' is not allowed"), ("'1'", "remove the quotes"),
+])
+def test_version_is_the_number_1(value: str, message: str) -> None:
+    d = _one_error(SPEC.replace("version: 1", f"version: {value}"))
+    assert d.path == ("version",) and message in d.message
+
+
+def test_a_long_wrong_value_is_quoted_not_printed() -> None:
+    d = _one_error(SPEC.replace("name: reach", "name: " + "é" * 5000))
+    assert d.message == "at most 64 characters, got 5000"
+    d = _one_error(SPEC.replace("joint_torque: {max: 100}", "joint_torque: {max: 100, unit: " + "N" * 5000 + "}"))
+    assert len(d.message) < 200 and "(5002 characters)" in d.message
+
+
+def test_many_errors_are_capped_with_a_count(tmp_path: Path) -> None:
+    text = SPEC.split("tasks:")[0] + "tasks: [" + ", ".join(["1"] * 5000) + "]\n"
+    with pytest.raises(SpecError) as caught:
+        load_spec_text(text, "f.yaml")
+    shown = caught.value.diagnostics
+    assert len(shown) == MAX_DIAGNOSTICS + 1 and len(caught.value.errors) == MAX_DIAGNOSTICS
+    note = shown[-1]
+    assert note.severity == "info" and f"{5000 - MAX_DIAGNOSTICS} more problems not shown" in note.message
+    assert note.line == 13 and note.column is not None  # where the first one left out is
+    assert len(str(caught.value)) < 10_000
+
+
+def test_errors_come_before_warnings_when_capped() -> None:
+    warnings = [Diagnostic(f"w{i}", "warning", "f.yaml", i + 1, 1) for i in range(MAX_DIAGNOSTICS)]
+    error = Diagnostic("e", "error", "f.yaml", 99, 1)
+    kept = SpecError([*warnings, error]).diagnostics
+    assert error in kept and kept[-1].message.startswith("1 more problems not shown (0 errors)")
+
+
+def test_big_and_endless_files_are_refused(tmp_path: Path) -> None:
+    big = tmp_path / "big.yaml"
+    big.write_bytes(b"# padding\n" * (MAX_BYTES // 10 + 1))
+    for path in (big, Path("/dev/zero")):
+        if not path.exists():
+            continue
+        start = time.perf_counter()
+        with pytest.raises(SpecError) as caught:
+            read_yaml_file(path)
+        assert time.perf_counter() - start < 1.0
+        (d,) = caught.value.diagnostics
+        assert (d.line, d.column) == (1, 1) and "larger than 1000 kB" in d.message
+
+
+def test_bytes_that_are_not_utf8_are_located(tmp_path: Path) -> None:
+    path = tmp_path / "s.yaml"
+    path.write_bytes(b"a: 1\nb: \xff\n")
+    with pytest.raises(SpecError) as caught:
+        read_yaml_file(path)
+    (d,) = caught.value.diagnostics
+    assert (d.line, d.column) == (2, 4) and "0xff is not UTF-8" in d.message
+
+
+# --- numeric ranges: what validation accepts, the compiler builds ------------------------------------
+
+
+@pytest.mark.parametrize(("old", "new", "path", "message"), [
+    ("joint_torque: {max: 100}", "joint_torque: {max: 1e308, allow_outside_urdf: true}", ("limits", "joint_torque", "max"),
+     "must be > 0 and ≤ 1e6 Nm, got 1e308"),
+    ("joint_torque: {max: 100}", "joint_torque: {max: 100}\n  joint_velocity: {max: [1, 1, 1, 1, 1, 1, 1e308]}",
+     ("limits", "joint_velocity", "max"), "item 6: must be > 0 and ≤ 1e5, got 1e308"),
+    ("kp: [100, 100, 200]", "kp: 1e200", ("tasks", 0, "gains", "kp"), "must be ≥ 0 and ≤ 1e8 1/s², got 1e200"),
+    ("priority: 2", "priority: 1001", ("tasks", 1, "priority"), "must be ≥ 1 and ≤ 1000, got 1001"),
+    ("model: iiwa14", "model: iiwa14\n  locked_joints: {joint7: 1e300}", ("robot", "locked_joints", "joint7"),
+     "must be ≥ -1e4 and ≤ 1e4, got 1e300"),
+])
+def test_numbers_out_of_range_name_the_range(old: str, new: str, path: tuple, message: str) -> None:
+    d = _one_error(SPEC.replace(old, new))
+    assert d.path == path and message in d.message, str(d)
+
+
+@pytest.mark.parametrize("weights", ["[0, 1]", "[1, -1]", "[1e21, 1]"])
+def test_priority_weights_out_of_range(weights: str) -> None:
+    d = _one_error(SPEC + f"controller: {{formulation: qp_mt, priority_weights: {weights}}}\n")
+    assert d.path == ("controller", "priority_weights") and "must be ≥ 1e-10 and ≤ 1e20" in d.message
+
+
+EXTREMES = SPEC.replace("""  joint_position:
+    min: [-160, -110, -160, -110, -160, -110, -170]
+    max: 160
+    unit: deg
+""", "").replace("joint_torque: {max: 100}", (
+    "joint_torque: {max: 1e6, allow_outside_urdf: true}\n"
+    "  joint_velocity: {max: 1e5, allow_outside_urdf: true}\n"
+    "  joint_acceleration: {max: 1e7}\n"
+    "  cartesian: [{frame: tool, axis: z, min: -1e3, max: 1e3, max_velocity: 1e3, max_acceleration: 1e5}]"
+)).replace("kp: [100, 100, 200], kd: 20", "kp: 1e8, kd: 1e5, max_velocity: 1e3")
+
+
+@pytest.mark.parametrize(("formulation", "settings"), [
+    ("dcts", "fallback_damping: 1e5"),
+    ("qp_md", "priority_weights: [1e20, 1e-10], regularization_weight: 1e6, joint_damping: 1e4"),
+])
+def test_the_extremes_of_every_range_build_a_controller(formulation: str, settings: str) -> None:
+    """Validation's ranges are ones the compiler builds: the limits of the ranges at once give a
+    controller whose step is finite (a torque limit of 1e308 or a weight of 0 did not)."""
+    from dcts_spec.controller import build_controller
+    from dcts_spec.validate import validate_spec
+
+    spec = load_spec_text(EXTREMES + f"controller: {{formulation: {formulation}, period: 1e-5, {settings}}}\n", "f.yaml")
+    report = validate_spec(spec)
+    controller = build_controller(spec)
+    result = controller.step(report.initial_q, np.zeros(7))
+    assert np.all(np.isfinite(result.tau))
 
 
 # --- units, scalar-or-list fields --------------------------------------------------------------------------
@@ -183,11 +340,11 @@ def test_scalar_or_list_rejects(value: str, message: str) -> None:
 
 def test_number_constraints_are_enforced() -> None:
     (d,) = _errors(SPEC + "controller: {period: 0}\n")
-    assert (d.line, d.path) == (26, ("controller", "period")) and "must be > 0" in d.message
+    assert (d.line, d.path) == (26, ("controller", "period")) and "must be ≥ 1e-5 and ≤ 0.1 s, got 0" in d.message
     (d,) = _errors(SPEC + "controller: {period: 1}\n")
-    assert "must be ≤ 0.1" in d.message
+    assert "must be ≥ 1e-5 and ≤ 0.1 s, got 1" in d.message
     (d,) = _errors(SPEC + "scenario: {duration: -1}\n")
-    assert d.path == ("scenario", "duration") and "must be > 0" in d.message
+    assert d.path == ("scenario", "duration") and "must be > 0 and ≤ 1e4 s" in d.message
     (d,) = _errors(SPEC.replace("priority: 2", "priority: true"))
     assert d.path == ("tasks", 1, "priority") and "whole number" in d.message
 

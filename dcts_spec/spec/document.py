@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Literal
+from typing import Annotated, Any, Literal
 
-from pydantic import ConfigDict, Field, PrivateAttr
+from pydantic import BeforeValidator, ConfigDict, Field, PrivateAttr
 
 from .controller import ControllerSpec
 from .limits import LimitsSpec
@@ -14,6 +14,13 @@ from .scenario import ScenarioSpec
 from .source import SourceMap
 from .tasks import TaskSpec
 from .types import StrictModel
+
+
+def _not_a_boolean(value: Any) -> Any:
+    """`version: true` is not version 1 (Python's True == 1 would pass the literal)."""
+    if isinstance(value, bool):
+        raise ValueError(f"expected the number 1, got {str(value).lower()}")
+    return value
 
 
 class Spec(StrictModel):
@@ -32,7 +39,7 @@ class Spec(StrictModel):
         "scenario": {"duration": 2.0, "initial_q": [0, 30, 0, -60, 0, 60, 0], "unit": "deg"},
     }]})
 
-    version: Literal[1] = Field(description="spec language version; 1 is the only one", examples=[1])
+    version: Annotated[Literal[1], BeforeValidator(_not_a_boolean)] = Field(description="spec language version; 1 is the only one", examples=[1])
     name: str = Field(
         pattern=r"^[A-Za-z_][A-Za-z0-9_]*$",
         max_length=64,

@@ -49,11 +49,18 @@ class Diagnostic:
         }
 
 
+MAX_DIAGNOSTICS = 50  # a 100,000-item list of wrong values must not print megabytes
+
+
 @dataclass
 class SpecError(Exception):
-    """A spec that cannot be used; carries every problem found, not just the first."""
+    """A spec that cannot be used; carries every problem found (up to MAX_DIAGNOSTICS, errors first,
+    then a note of how many more there are), not just the first."""
 
     diagnostics: list[Diagnostic] = field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        self.diagnostics = _capped(self.diagnostics)
 
     def __str__(self) -> str:
         return "\n".join(str(d) for d in self.diagnostics)
@@ -63,7 +70,28 @@ class SpecError(Exception):
         return [d for d in self.diagnostics if d.severity == "error"]
 
 
+def _capped(diagnostics: list[Diagnostic]) -> list[Diagnostic]:
+    """At most MAX_DIAGNOSTICS, errors before warnings, in their order; an `info` says how many were left out."""
+    if len(diagnostics) <= MAX_DIAGNOSTICS:
+        return diagnostics
+    order = sorted(range(len(diagnostics)), key=lambda i: diagnostics[i].severity != "error")
+    kept = sorted(order[:MAX_DIAGNOSTICS])
+    first_left = diagnostics[order[MAX_DIAGNOSTICS]]
+    left = len(diagnostics) - MAX_DIAGNOSTICS
+    errors_left = sum(diagnostics[i].severity == "error" for i in order[MAX_DIAGNOSTICS:])
+    note = Diagnostic(f"{left} more problems not shown ({errors_left} errors), the first of them here; "
+                      f"fix these {MAX_DIAGNOSTICS} and run again", "info", first_left.file, first_left.line,
+                      first_left.column)
+    return [diagnostics[i] for i in kept] + [note]
+
+
+def shown(value: object, limit: int = 60) -> str:
+    """`repr(value)`, cut to `limit` characters: a wrong value is quoted, not printed whole."""
+    text = repr(value)
+    return text if len(text) <= limit else f"{text[:limit]}… ({len(text)} characters)"
+
+
 def did_you_mean(word: str, choices: list[str], n: int = 1) -> str:
     """` (did you mean 'x'?)` for the closest choices, or an empty string."""
     close = difflib.get_close_matches(word, choices, n=n, cutoff=0.5)
-    return f" (did you mean {' or '.join(repr(c) for c in close)}?)" if close else ""
+    return f" (did you mean {' or '.join(shown(c) for c in close)}?)" if close else ""

@@ -2,11 +2,11 @@
 
 from __future__ import annotations
 
-from typing import Literal
+from typing import Annotated, Literal
 
 from pydantic import Field, model_validator
 
-from .types import FieldError, Number, ScalarOrVector, StrictModel
+from .types import JOINT_VALUE, LENGTH, FieldError, Number, Range, ScalarOrVector, StrictModel
 from .units import AngleUnit, AngularAccelerationUnit, AngularVelocityUnit
 
 _ALLOW_OUTSIDE_URDF = "accept limits wider than the URDF's (with a warning) instead of refusing them"
@@ -15,10 +15,10 @@ _ALLOW_OUTSIDE_URDF = "accept limits wider than the URDF's (with a warning) inst
 class JointPositionLimits(StrictModel):
     """Joint position bounds min ≤ q ≤ max, replacing the URDF's (narrower unless allowed)."""
 
-    min: ScalarOrVector | None = Field(None, description="lower bound in `unit` (rad or deg; m for a prismatic "
+    min: Annotated[ScalarOrVector, JOINT_VALUE] | None = Field(None, description="lower bound in `unit` (rad or deg; m for a prismatic "
                                        "joint), one value or one per joint; default: the URDF's",
                                        examples=[-160, [-165, -115, -165, -115, -165, -115, -170]])
-    max: ScalarOrVector | None = Field(None, description="upper bound in `unit` (rad or deg; m for a prismatic "
+    max: Annotated[ScalarOrVector, JOINT_VALUE] | None = Field(None, description="upper bound in `unit` (rad or deg; m for a prismatic "
                                        "joint), one value or one per joint; default: the URDF's",
                                        examples=[160, [165, 115, 165, 115, 165, 115, 170]])
     unit: AngleUnit = Field("rad", description="unit of min and max", examples=["deg"])
@@ -34,7 +34,7 @@ class JointPositionLimits(StrictModel):
 class JointVelocityLimits(StrictModel):
     """Joint velocity bounds |q̇| ≤ max."""
 
-    max: ScalarOrVector = Field(description="in `unit` (rad/s or deg/s; m/s for a prismatic joint), one value or "
+    max: Annotated[ScalarOrVector, Range(0, 1e5, open=True)] = Field(description="in `unit` (rad/s or deg/s; m/s for a prismatic joint), one value or "
                                 "one per joint", examples=[1.5, [100, 110, 100, 130, 130, 180, 180]])
     unit: AngularVelocityUnit = Field("rad/s", description="unit of max", examples=["deg/s"])
     allow_outside_urdf: bool = Field(False, description=_ALLOW_OUTSIDE_URDF, examples=[False])
@@ -43,7 +43,7 @@ class JointVelocityLimits(StrictModel):
 class JointAccelerationLimits(StrictModel):
     """Joint acceleration bounds |q̈| ≤ max (the URDF has none)."""
 
-    max: ScalarOrVector = Field(description="in `unit` (rad/s² or deg/s²; m/s² for a prismatic joint), one value "
+    max: Annotated[ScalarOrVector, Range(0, 1e7, open=True)] = Field(description="in `unit` (rad/s² or deg/s²; m/s² for a prismatic joint), one value "
                                 "or one per joint", examples=[20, [500, 500, 600, 600, 800, 800, 1000]])
     unit: AngularAccelerationUnit = Field("rad/s^2", description="unit of max", examples=["deg/s^2"])
 
@@ -51,7 +51,7 @@ class JointAccelerationLimits(StrictModel):
 class JointTorqueLimits(StrictModel):
     """Joint torque bounds |τ| ≤ max."""
 
-    max: ScalarOrVector = Field(description="in Nm (N for a prismatic joint), one value or one per joint",
+    max: Annotated[ScalarOrVector, Range(0, 1e6, "Nm", open=True)] = Field(description="in Nm (N for a prismatic joint), one value or one per joint",
                                 examples=[100, [176, 176, 110, 110, 110, 40, 40]])
     unit: Literal["Nm"] = Field("Nm", description="unit of max: Nm", examples=["Nm"])
     allow_outside_urdf: bool = Field(False, description=_ALLOW_OUTSIDE_URDF, examples=[False])
@@ -65,7 +65,7 @@ class CartesianLimit(StrictModel):
     frame: str = Field(description="the robot frame (link, joint or spec frame) whose origin is bounded",
                        examples=["tool", "link7"])
     axis: Literal["x", "y", "z"] | None = Field(None, description="a world axis; or give `normal`", examples=["z"])
-    normal: list[Number] | None = Field(
+    normal: list[Annotated[Number, Range(-1e6, 1e6)]] | None = Field(
         None, min_length=3, max_length=3,
         description="the plane's normal (3 values, unitless, any length: it is normalized); min/max are distances "
                     "along it, m",
@@ -73,13 +73,13 @@ class CartesianLimit(StrictModel):
     expressed_in: str | None = Field(
         None, description="a frame fixed to the world (the base, or a frame you define on it) in which normal, "
                           "min and max are given; default: world", examples=["table"])
-    min: Number | None = Field(None, description="lower bound of the coordinate along the axis or normal, m",
+    min: Annotated[Number, LENGTH] | None = Field(None, description="lower bound of the coordinate along the axis or normal, m",
                                examples=[0.1])
-    max: Number | None = Field(None, description="upper bound of the coordinate along the axis or normal, m",
+    max: Annotated[Number, LENGTH] | None = Field(None, description="upper bound of the coordinate along the axis or normal, m",
                                examples=[0.8])
-    max_velocity: Number | None = Field(None, gt=0, description="bound on the frame's speed along the axis or "
+    max_velocity: Annotated[Number, Range(0, 1e3, "m/s", open=True)] | None = Field(None, description="bound on the frame's speed along the axis or "
                                         "normal, m/s; optional", examples=[0.5])
-    max_acceleration: Number = Field(5.0, gt=0, description="braking acceleration assumed by the viability bound, m/s²",
+    max_acceleration: Annotated[Number, Range(0, 1e5, "m/s²", open=True)] = Field(5.0, description="braking acceleration assumed by the viability bound, m/s²",
                                      examples=[5.0])
 
     @model_validator(mode="after")

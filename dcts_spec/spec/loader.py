@@ -11,7 +11,7 @@ from typing import Any
 from pydantic import BaseModel, ValidationError
 
 from .document import Spec
-from .errors import Diagnostic, KeyPath, SpecError, did_you_mean
+from .errors import Diagnostic, KeyPath, SpecError, did_you_mean, shown
 from .source import SourceMap, read_yaml, read_yaml_file
 from .types import FieldError
 
@@ -53,10 +53,8 @@ def _diagnostics(exc: ValidationError, data: Any, source: SourceMap) -> list[Dia
             found[key] = (rank, source.diagnostic(path, _message(error, path, rest, data)))
     # A type mismatch of one alternative says nothing when another alternative found problems inside the
     # value (`external_torque: {mode: noisey}` is not the literal `ideal`, but the useful error is about `mode`).
-    kept = [
-        d for key, (rank, d) in found.items()
-        if rank == 0 or not any(len(other) > len(key) and other[: len(key)] == key for other in found)
-    ]
+    inside = {key[:end] for key in found for end in range(len(key))}  # proper prefixes: keys with errors below
+    kept = [d for key, (rank, d) in found.items() if rank == 0 or key not in inside]
     return sorted(kept, key=lambda d: (d.line or 0, d.column or 0))
 
 
@@ -101,7 +99,7 @@ def _message(error: dict, path: KeyPath, rest: tuple, data: Any) -> str:
         parent = path if rest else path[:-1]
         allowed = _allowed_keys(parent, data)
         hint = did_you_mean(str(key), allowed)
-        return f"unknown key {key!r}{hint}; allowed keys: {', '.join(allowed)}" if allowed else f"unknown key {key!r}"
+        return f"unknown key {shown(key)}{hint}; allowed keys: {', '.join(allowed)}" if allowed else f"unknown key {shown(key)}"
     if kind == "missing":
         return f"missing required key {rest[0]!r}" if rest else "missing required value"
     if kind == "literal_error":
@@ -110,11 +108,11 @@ def _message(error: dict, path: KeyPath, rest: tuple, data: Any) -> str:
         got = error["input"]
         if isinstance(got, str) and got in allowed:  # `version: "1"`
             return f"expected the number {got}, got the text {got!r} (remove the quotes)"
-        return f"{got!r} is not allowed{did_you_mean(str(got), allowed)}; allowed: {', '.join(allowed)}"
+        return f"{shown(got)} is not allowed{did_you_mean(str(got), allowed)}; allowed: {', '.join(allowed)}"
     if kind == "union_tag_invalid":
         allowed = re.findall(r"'([^']*)'", error["ctx"]["expected_tags"])
         got = error["ctx"]["tag"]
-        return f"unknown type {got!r}{did_you_mean(str(got), allowed)}; allowed: {', '.join(allowed)}"
+        return f"unknown type {shown(got)}{did_you_mean(str(got), allowed)}; allowed: {', '.join(allowed)}"
     if kind == "union_tag_not_found":
         tag_key = error["ctx"]["discriminator"].strip("'")  # pydantic quotes it: "'type'"
         return f"missing key {tag_key!r} (what kind of entry this is)"
@@ -123,7 +121,9 @@ def _message(error: dict, path: KeyPath, rest: tuple, data: Any) -> str:
     if kind == "list_type":
         return f"expected a list, got {_describe(error['input'])}"
     if kind == "string_pattern_mismatch":
-        return f"{error['input']!r} is not an identifier (letters, digits and _, not starting with a digit)"
+        return f"{shown(error['input'])} is not an identifier (letters, digits and _, not starting with a digit)"
+    if kind == "string_too_long":
+        return f"at most {error['ctx']['max_length']} characters, got {len(error['input'])}"
     if kind == "string_type":
         return f"expected text, got {_describe(error['input'])}"
     if kind in ("float_type", "float_parsing"):
@@ -153,7 +153,7 @@ def _describe(value: Any) -> str:
         return "a list"
     if value is None:
         return "nothing (an empty value)"
-    return repr(value)
+    return shown(value)
 
 
 def _allowed_keys(path: KeyPath, data: Any) -> list[str]:

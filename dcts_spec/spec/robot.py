@@ -2,20 +2,23 @@
 
 from __future__ import annotations
 
-from typing import Literal
+from typing import Annotated, Literal
 
-from pydantic import Field, model_validator
+from pydantic import Field, field_validator, model_validator
 
-from .types import Number, StrictModel, Vec3
+from .types import JOINT_VALUE, LENGTH, Number, StrictModel, Vec3
 from .units import AngleUnit
+
+
+_NAME_MAX, _PATH_MAX = 255, 4096  # Linux's NAME_MAX and PATH_MAX, the smallest usual limits
 
 
 class FrameSpec(StrictModel):
     """An extra frame fixed to a link (or to another frame) of the robot."""
 
     parent: str = Field(description="link, joint or frame the new frame is attached to", examples=["link7"])
-    xyz: Vec3 = Field((0.0, 0.0, 0.0), description="position of the frame in its parent, m", examples=[[0, 0.05, 0.08]])
-    rpy: Vec3 = Field((0.0, 0.0, 0.0), description="roll, pitch, yaw of the frame in its parent, in `unit`",
+    xyz: Annotated[Vec3, LENGTH] = Field((0.0, 0.0, 0.0), description="position of the frame in its parent, m", examples=[[0, 0.05, 0.08]])
+    rpy: Annotated[Vec3, JOINT_VALUE] = Field((0.0, 0.0, 0.0), description="roll, pitch, yaw of the frame in its parent, in `unit`",
                       examples=[[0, 90, 0]])
     unit: AngleUnit = Field("rad", description="unit of rpy", examples=["deg"])
 
@@ -29,10 +32,22 @@ class RobotSpec(StrictModel):
     frames: dict[str, FrameSpec] = Field(
         default_factory=dict, description="extra frames by name (tool tips, cameras), usable wherever a frame is named",
         examples=[{"camera": {"parent": "link7", "xyz": [0, 0.05, 0.08]}}])
-    locked_joints: dict[str, Number] = Field(
+    locked_joints: dict[str, Annotated[Number, JOINT_VALUE]] = Field(
         default_factory=dict, description="joints fixed at a value (rad, or m for a prismatic joint), e.g. gripper fingers",
         examples=[{"panda_finger_joint1": 0.02}],
     )
+
+    @field_validator("urdf")
+    @classmethod
+    def _a_possible_path(cls, path: str | None) -> str | None:
+        """A path the file system can look up (a longer one is an OSError, not 'not found')."""
+        if path is None:
+            return path
+        longest = max(len(part.encode()) for part in path.split("/"))
+        if longest > _NAME_MAX or len(path.encode()) > _PATH_MAX:
+            raise ValueError(f"not a possible file path: a name of at most {_NAME_MAX} bytes, a path of at most "
+                             f"{_PATH_MAX}; got a name of {longest} bytes in a path of {len(path.encode())}")
+        return path
 
     @model_validator(mode="after")
     def _one_source(self) -> "RobotSpec":

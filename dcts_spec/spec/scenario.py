@@ -6,7 +6,7 @@ from typing import Annotated, Literal
 
 from pydantic import Field
 
-from .types import Integer, Number, NumberList, ScalarOrVector, StrictModel, Vec3
+from .types import DURATION, JOINT_VALUE, LENGTH, TIME, TORQUE, Integer, Number, NumberList, Range, ScalarOrVector, StrictModel, Vec3
 from .units import AngleUnit
 
 
@@ -15,23 +15,23 @@ class ForceDisturbance(StrictModel):
 
     type: Literal["force"] = Field(description="force: a wrench on a body", examples=["force"])
     body: str = Field(description="link or frame the force acts on", examples=["link7"])
-    point: Vec3 = Field((0.0, 0.0, 0.0), description="application point in the body's frame, m",
+    point: Annotated[Vec3, LENGTH] = Field((0.0, 0.0, 0.0), description="application point in the body's frame, m",
                         examples=[[0, 0, 0.045]])
-    force: Vec3 = Field((0.0, 0.0, 0.0), description="force in world axes, N", examples=[[10, 0, 0]])
-    torque: Vec3 = Field((0.0, 0.0, 0.0), description="torque in world axes, Nm", examples=[[0, 0, 1]])
-    start: Number = Field(ge=0, description="when it starts, s after the start of the run", examples=[0.5])
-    duration: Number = Field(gt=0, description="how long it lasts, s", examples=[0.4])
+    force: Annotated[Vec3, Range(-1e6, 1e6, "N")] = Field((0.0, 0.0, 0.0), description="force in world axes, N", examples=[[10, 0, 0]])
+    torque: Annotated[Vec3, TORQUE] = Field((0.0, 0.0, 0.0), description="torque in world axes, Nm", examples=[[0, 0, 1]])
+    start: Annotated[Number, TIME] = Field(description="when it starts, s after the start of the run", examples=[0.5])
+    duration: Annotated[Number, DURATION] = Field(description="how long it lasts, s", examples=[0.4])
 
 
 class JointTorqueDisturbance(StrictModel):
     """External joint torques (e.g. a person pushing) during a time window."""
 
     type: Literal["joint_torque"] = Field(description="joint_torque: torques on the joints", examples=["joint_torque"])
-    torque: NumberList = Field(description="one value per joint, Nm (N for a prismatic joint)",
+    torque: Annotated[NumberList, TORQUE] = Field(description="one value per joint, Nm (N for a prismatic joint)",
                                examples=[[0, 5, 0, -5, 0, 0, 0]])
-    start: Number = Field(ge=0, description="when it starts, s after the start of the run", examples=[1.0])
-    duration: Number = Field(gt=0, description="how long it lasts (ramps included), s", examples=[2.0])
-    ramp: Number = Field(0.0, ge=0, description="rise and fall time, s", examples=[0.2])
+    start: Annotated[Number, TIME] = Field(description="when it starts, s after the start of the run", examples=[1.0])
+    duration: Annotated[Number, DURATION] = Field(description="how long it lasts (ramps included), s", examples=[2.0])
+    ramp: Annotated[Number, TIME] = Field(0.0, description="rise and fall time, s", examples=[0.2])
 
 
 Disturbance = Annotated[ForceDisturbance | JointTorqueDisturbance, Field(discriminator="type")]
@@ -41,19 +41,19 @@ class Payload(StrictModel):
     """A mass the controller does not know about, rigidly attached at a frame (simulation only)."""
 
     frame: str = Field(description="link or frame the payload is attached to", examples=["tool"])
-    mass: Number = Field(gt=0, description="mass, kg", examples=[2.0])
-    com: Vec3 = Field((0.0, 0.0, 0.0), description="centre of mass in the frame, m", examples=[[0, 0, 0.05]])
+    mass: Annotated[Number, Range(0, 1e4, "kg", open=True)] = Field(description="mass, kg", examples=[2.0])
+    com: Annotated[Vec3, LENGTH] = Field((0.0, 0.0, 0.0), description="centre of mass in the frame, m", examples=[[0, 0, 0.05]])
 
 
 class Waypoints(StrictModel):
     """A path of points fed one after the other to a task with `reference: {input: true}`."""
 
     task: str = Field(description="name of the task that follows the points", examples=["tool_position"])
-    points: list[NumberList] = Field(min_length=1, description=(
+    points: list[Annotated[NumberList, JOINT_VALUE]] = Field(min_length=1, description=(
         "the points, each the task's reference: [x, y, z] in m for a position task, roll, pitch, yaw in `unit` "
         "for an orientation task, both for a pose, joint positions in `unit` for a joint task"),
         examples=[[[0.5, 0.2, 0.5], [0.5, -0.2, 0.5]]])
-    tolerance: Number = Field(gt=0, description="a point counts as reached when the norm of the task error is within "
+    tolerance: Annotated[Number, Range(0, 1e3, open=True)] = Field(description="a point counts as reached when the norm of the task error is within "
                               "this, m (rad for orientation and joint tasks, whatever `unit`)", examples=[0.01])
     unit: AngleUnit = Field("rad", description="unit of angles in the points (orientation/joint tasks)",
                             examples=["deg"])
@@ -65,26 +65,26 @@ class ExternalTorqueSensing(StrictModel):
     mode: Literal["ideal", "ignored", "noisy"] = Field(
         "ideal", description="ideal: the true external torque (Nm); ignored: zero; noisy: with noise_std and bias",
         examples=["noisy"])
-    noise_std: ScalarOrVector = Field(0.0, description="Gaussian noise (standard deviation), Nm, one value or one "
+    noise_std: Annotated[ScalarOrVector, Range(0, 1e6, "Nm")] = Field(0.0, description="Gaussian noise (standard deviation), Nm, one value or one "
                                       "per joint", examples=[0.5])
-    bias: ScalarOrVector = Field(0.0, description="constant offset, Nm, one value or one per joint", examples=[0.2])
-    seed: Integer = Field(0, description="seed of the noise generator (unitless)", examples=[0, 42])
+    bias: Annotated[ScalarOrVector, TORQUE] = Field(0.0, description="constant offset, Nm, one value or one per joint", examples=[0.2])
+    seed: Annotated[Integer, Range(0, 2**32 - 1)] = Field(0, description="seed of the noise generator (unitless)", examples=[0, 42])
 
 
 class ModelMismatch(StrictModel):
     """Differences between the simulated robot and the controller's model."""
 
-    mass_scale: Number = Field(1.0, gt=0, description="the controller's link masses and inertias are scaled by this "
+    mass_scale: Annotated[Number, Range(0, 1e3, open=True)] = Field(1.0, description="the controller's link masses and inertias are scaled by this "
                                "factor (unitless)", examples=[1.1])
 
 
 class ScenarioSpec(StrictModel):
     """A simulated run: its length, start, disturbances, payloads, waypoints and sensing."""
 
-    duration: Number = Field(gt=0, description="length of the run, s", examples=[2.0])
-    initial_q: NumberList | None = Field(None, description="initial joint positions in `unit`, one per joint; "
+    duration: Annotated[Number, DURATION] = Field(description="length of the run, s", examples=[2.0])
+    initial_q: Annotated[NumberList, JOINT_VALUE] | None = Field(None, description="initial joint positions in `unit`, one per joint; "
                                          "default: the middle of the joint range", examples=[[0, 30, 0, -60, 0, 60, 0]])
-    initial_dq: NumberList | None = Field(None, description="initial joint velocities in `unit` per s, one per "
+    initial_dq: Annotated[NumberList, Range(-1e5, 1e5)] | None = Field(None, description="initial joint velocities in `unit` per s, one per "
                                           "joint; default: 0", examples=[[0, 0, 0, 10, 0, 0, 0]])
     unit: AngleUnit = Field("rad", description="unit of initial_q and initial_dq (per s)", examples=["deg"])
     disturbances: list[Disturbance] = Field(
@@ -100,7 +100,7 @@ class ScenarioSpec(StrictModel):
         "settings of the noisy sensor", examples=["ignored", {"mode": "noisy", "noise_std": 0.5}])
     model_mismatch: ModelMismatch | None = Field(None, description="differences between the simulated robot and the "
                                                  "controller's model", examples=[{"mass_scale": 1.1}])
-    substeps: Integer = Field(1, ge=1, description="simulation steps per control period (the step is period/substeps, "
+    substeps: Annotated[Integer, Range(1, 1000)] = Field(1, description="simulation steps per control period (the step is period/substeps, "
                               "s)", examples=[1, 4])
     integrator: Literal["euler", "implicitfast", "implicit", "rk4"] = Field(
         "rk4",

@@ -2,25 +2,20 @@
 
 from __future__ import annotations
 
-import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import yaml
 
-from .errors import Diagnostic, KeyPath, SpecError
+from .compose import LimitError, compose
+from .errors import Diagnostic, KeyPath, SpecError, shown
 
 
-class _Loader(yaml.SafeLoader):
-    """The safe loader, also reading `1e6` and `1.0e-3` as numbers (YAML 1.2; YAML 1.1 wants `1.0e+6`)."""
-
-
-_Loader.add_implicit_resolver(
-    "tag:yaml.org,2002:float",
-    re.compile(r"^[-+]?[0-9][0-9_]*(?:\.[0-9_]*)?[eE][-+]?[0-9]+$"),
-    list("-+0123456789"),
-)
+MAX_BYTES = 1_000_000  # a spec is a few kB; a bigger file is not one (and /dev/zero never ends)
+MAX_NUMBER_CHARS = 30  # longer whole numbers are no spec value (and Python refuses 4,300 digits)
+_INT_TAG = "tag:yaml.org,2002:int"
+_STR_TAG = "tag:yaml.org,2002:str"
 
 
 @dataclass
@@ -44,41 +39,64 @@ class SourceMap:
 
 
 def _construct(node: yaml.Node, path: KeyPath, source: SourceMap, errors: list[Diagnostic]) -> Any:
-    """Build Python data from a composed YAML node, recording positions on the way."""
-    source.positions.setdefault(path, (node.start_mark.line + 1, node.start_mark.column + 1))
+    """Build Python data from a composed YAML node, recording positions on the way.
+
+    The composer bounds the depth and the alias expansion, so this recursion is bounded too.
+    """
+    source.positions.setdefault(path, _position(node.start_mark))
     if isinstance(node, yaml.MappingNode):
         out: dict[str, Any] = {}
         for key_node, value_node in node.value:
-            where = (key_node.start_mark.line + 1, key_node.start_mark.column + 1)
+            where = _position(key_node.start_mark)
             if key_node.tag == "tag:yaml.org,2002:merge":
                 message = "YAML merge keys (`<<`) are not supported; write the keys out"
                 errors.append(Diagnostic(message, "error", source.file, *where, path))
                 continue
-            key = _scalar(key_node)
+            if not isinstance(key_node, yaml.ScalarNode):
+                errors.append(Diagnostic(f"keys must be text, got a {key_node.id}", "error", source.file, *where, path))
+                continue
+            key = _scalar(key_node, source, errors)
             if not isinstance(key, str):
-                errors.append(Diagnostic(f"keys must be text, got {key!r}", "error", source.file, *where, path))
+                errors.append(Diagnostic(f"keys must be text, got {shown(key)}", "error", source.file, *where, path))
                 continue
             if key in out:
-                errors.append(Diagnostic(f"duplicate key {key!r}", "error", source.file, *where, path + (key,)))
+                errors.append(Diagnostic(f"duplicate key {shown(key)}", "error", source.file, *where, path + (key,)))
                 continue
             source.positions[path + (key,)] = where
             out[key] = _construct(value_node, path + (key,), source, errors)
         return out
     if isinstance(node, yaml.SequenceNode):
         return [_construct(item, path + (i,), source, errors) for i, item in enumerate(node.value)]
-    return _scalar(node)
+    return _scalar(node, source, errors)
 
 
-def _scalar(node: yaml.Node) -> Any:
-    """A YAML scalar (or a complex key) as Python data, with YAML 1.1 typing rules."""
-    return yaml.constructor.SafeConstructor().construct_object(node, deep=True)
+def _position(mark: yaml.Mark) -> tuple[int, int]:
+    return mark.line + 1, mark.column + 1
+
+
+def _scalar(node: yaml.ScalarNode, source: SourceMap, errors: list[Diagnostic]) -> Any:
+    """A YAML scalar as Python data (YAML 1.1 typing rules); a value YAML cannot make is an error."""
+    if node.tag == _INT_TAG and len(node.value) > MAX_NUMBER_CHARS:
+        message = f"a whole number of {len(node.value)} characters is out of range for any spec value"
+        errors.append(Diagnostic(message, "error", source.file, *_position(node.start_mark)))
+        return None
+    if node.tag == _STR_TAG:
+        return node.value  # most scalars: no need for PyYAML's constructor
+    try:
+        return yaml.constructor.SafeConstructor().construct_object(node, deep=True)
+    except (yaml.constructor.ConstructorError, ValueError, TypeError, OverflowError) as exc:
+        problem = exc.problem if isinstance(exc, yaml.MarkedYAMLError) else str(exc)
+        errors.append(Diagnostic(f"invalid YAML value: {problem}", "error", source.file, *_position(node.start_mark)))
+        return None
 
 
 def read_yaml(text: str, file: str) -> tuple[Any, SourceMap]:
     """Parse YAML text into plain data and a source map; syntax errors become located diagnostics."""
     source = SourceMap(file)
     try:
-        node = yaml.compose(text, Loader=_Loader)
+        node = compose(text)
+    except LimitError as exc:
+        raise SpecError([Diagnostic(exc.problem, "error", file, *_position(exc.problem_mark))]) from None
     except yaml.MarkedYAMLError as exc:
         mark = exc.problem_mark or exc.context_mark
         problem = " ".join(filter(None, [exc.context, exc.problem]))
@@ -90,6 +108,11 @@ def read_yaml(text: str, file: str) -> tuple[Any, SourceMap]:
         line = mark.line + 1 if mark else None
         column = mark.column + 1 if mark else None
         raise SpecError([Diagnostic(f"invalid YAML: {problem}{hint}", "error", file, line, column)]) from None
+    except yaml.reader.ReaderError as exc:
+        line = text.count("\n", 0, exc.position) + 1
+        column = exc.position - text.rfind("\n", 0, exc.position)
+        message = f"invalid YAML: the character U+{exc.character:04X} is not allowed (control characters other than tab and newline)"
+        raise SpecError([Diagnostic(message, "error", file, line, column)]) from None
     except yaml.YAMLError as exc:
         raise SpecError([Diagnostic(f"invalid YAML: {exc}", "error", file, 1, 1)]) from None
     if node is None:
@@ -97,27 +120,34 @@ def read_yaml(text: str, file: str) -> tuple[Any, SourceMap]:
             [Diagnostic("the file is empty; a spec is a mapping with at least `version`, `name`, `robot` and `tasks`", "error", file, 1, 1)]
         )
     errors: list[Diagnostic] = []
-    try:
-        data = _construct(node, (), source, errors)
-    except yaml.constructor.ConstructorError as exc:
-        mark = exc.problem_mark
-        raise SpecError([Diagnostic(f"invalid YAML value: {exc.problem}", "error", file, mark.line + 1, mark.column + 1)]) from None
+    data = _construct(node, (), source, errors)
     if errors:
         raise SpecError(errors)
     if not isinstance(data, dict):
-        kind = "a list" if isinstance(data, list) else f"the value {data!r}"
+        kind = "a list" if isinstance(data, list) else f"the value {shown(data)}"
         message = f"a spec must be a mapping of keys (version, name, robot, tasks, ...), but the file holds {kind}"
         raise SpecError([source.diagnostic((), message)])
     return data, source
 
 
 def read_yaml_file(path: str | Path) -> tuple[Any, SourceMap]:
-    """Read a YAML file; a missing or unreadable file is a located diagnostic too."""
+    """Read a YAML file of at most MAX_BYTES; a missing, unreadable or too big file is a located diagnostic too."""
     path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8")
+        with path.open("rb") as stream:
+            raw = stream.read(MAX_BYTES + 1)
     except FileNotFoundError:
         raise SpecError([Diagnostic("no such file", "error", str(path))]) from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise SpecError([Diagnostic(f"cannot read the file: {exc}", "error", str(path))]) from None
+    except OSError as exc:
+        raise SpecError([Diagnostic(f"cannot read the file: {exc.strerror or exc}", "error", str(path))]) from None
+    if len(raw) > MAX_BYTES:
+        message = f"the file is larger than {MAX_BYTES // 1000} kB; a spec is a few kB of YAML"
+        raise SpecError([Diagnostic(message, "error", str(path), 1, 1)])
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = raw.count(b"\n", 0, exc.start) + 1
+        column = exc.start - raw.rfind(b"\n", 0, exc.start)
+        message = f"cannot read the file: byte 0x{raw[exc.start]:02x} is not UTF-8 text"
+        raise SpecError([Diagnostic(message, "error", str(path), line, column)]) from None
     return read_yaml(text, str(path))

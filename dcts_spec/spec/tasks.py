@@ -2,11 +2,11 @@
 
 from __future__ import annotations
 
-from typing import Literal
+from typing import Annotated, Literal
 
 from pydantic import Field, model_validator
 
-from .types import FieldError, Integer, Number, NumberList, ScalarOrVector, StrictModel, Vec3, size_of
+from .types import JOINT_VALUE, LENGTH, FieldError, Integer, Number, NumberList, Range, ScalarOrVector, StrictModel, Vec3, size_of
 from .units import AngleUnit
 
 TaskType = Literal["position", "orientation", "pose", "joint"]
@@ -30,21 +30,16 @@ REFERENCE_FIELDS: dict[str, tuple[str, ...]] = {
 class Gains(StrictModel):
     """PD gains of the task's error dynamics ẍ_d = kp Δx − kd ẋ (+ feed-forward)."""
 
-    kp: ScalarOrVector = Field(description="stiffness in 1/s², one value or one per task axis (0: a pure damping task)",
+    kp: Annotated[ScalarOrVector, Range(0, 1e8, "1/s²")] = Field(description="stiffness in 1/s², one value or one per task axis (0: a pure damping task)",
                                examples=[100, [100, 100, 200]])
-    kd: ScalarOrVector = Field(description="damping in 1/s, one value or one per task axis", examples=[20, [20, 20, 28]])
-    max_velocity: Number | None = Field(
-        None, gt=0, description="saturate the desired velocity (kp/kd)Δx to this norm (m/s, rad/s for orientation "
+    kd: Annotated[ScalarOrVector, Range(0, 1e5, "1/s")] = Field(description="damping in 1/s, one value or one per task axis", examples=[20, [20, 20, 28]])
+    max_velocity: Annotated[Number, Range(0, 1e3, open=True)] | None = Field(
+        None, description="saturate the desired velocity (kp/kd)Δx to this norm (m/s, rad/s for orientation "
         "and joint tasks)", examples=[0.25]
     )
 
     @model_validator(mode="after")
-    def _non_negative(self) -> "Gains":
-        for name in ("kp", "kd"):
-            value = getattr(self, name)
-            values = value if isinstance(value, tuple) else (value,)
-            if any(v < 0 for v in values):
-                raise FieldError(name, f"{name} must be ≥ 0, got {value}")
+    def _saturation_needs_stiffness(self) -> "Gains":
         if self.max_velocity is not None and not self.has_stiffness():
             raise FieldError("max_velocity", "max_velocity needs kp > 0 (it saturates the velocity (kp/kd)Δx)")
         return self
@@ -57,11 +52,11 @@ class Gains(StrictModel):
 class Reference(StrictModel):
     """Target of a task: constant (world frame) or a run-time input of the compiled controller."""
 
-    position: Vec3 | None = Field(None, description="target point [x, y, z] of the frame's origin in the world, m",
+    position: Annotated[Vec3, LENGTH] | None = Field(None, description="target point [x, y, z] of the frame's origin in the world, m",
                                   examples=[[0.5, 0.0, 0.6]])
-    rpy: Vec3 | None = Field(None, description="target orientation as roll, pitch, yaw (world), in `unit`",
+    rpy: Annotated[Vec3, JOINT_VALUE] | None = Field(None, description="target orientation as roll, pitch, yaw (world), in `unit`",
                              examples=[[180, 0, 0]])
-    q: NumberList | None = Field(None, description="target joint positions in `unit` (m for a prismatic joint), "
+    q: Annotated[NumberList, JOINT_VALUE] | None = Field(None, description="target joint positions in `unit` (m for a prismatic joint), "
                                  "one per joint of the task", examples=[[0, 30, 0, -60, 0, 60, 0]])
     unit: AngleUnit = Field("rad", description="unit of rpy or q", examples=["deg"])
     input: bool = Field(False, description="the reference is an input of the controller at run time (waypoints "
@@ -90,7 +85,7 @@ class TaskSpec(StrictModel):
         "[rz]: only the spin about the frame's z); see docs/tasks.md"), examples=[["x", "y"], ["rx", "ry"]])
     joints: list[str] | None = Field(None, description="joints of a joint task (default: all)",
                                      examples=[["joint1", "joint3"]])
-    priority: Integer = Field(ge=1, description="1 is the highest; tasks may share a level", examples=[1, 2])
+    priority: Annotated[Integer, Range(1, 1000)] = Field(description="1 is the highest; tasks may share a level", examples=[1, 2])
     gains: Gains = Field(description="PD gains of the task", examples=[{"kp": 100, "kd": 20}])
     reference: Reference | None = Field(
         None, description="the target; a task with kp ≠ 0 needs one", examples=[{"position": [0.5, 0.0, 0.6]},
