@@ -250,7 +250,7 @@ def test_bytes_that_are_not_utf8_are_located(tmp_path: Path) -> None:
     ("joint_torque: {max: 100}", "joint_torque: {max: 1e308, allow_outside_urdf: true}", ("limits", "joint_torque", "max"),
      "must be > 0 and ≤ 1e6 Nm, got 1e308"),
     ("joint_torque: {max: 100}", "joint_torque: {max: 100}\n  joint_velocity: {max: [1, 1, 1, 1, 1, 1, 1e308]}",
-     ("limits", "joint_velocity", "max"), "item 6: must be > 0 and ≤ 1e5, got 1e308"),
+     ("limits", "joint_velocity", "max"), "item 6: must be > 0 and ≤ 1e4, got 1e308"),
     ("kp: [100, 100, 200]", "kp: 1e200", ("tasks", 0, "gains", "kp"), "must be ≥ 0 and ≤ 1e8 1/s², got 1e200"),
     ("priority: 2", "priority: 1001", ("tasks", 1, "priority"), "must be ≥ 1 and ≤ 1000, got 1001"),
     ("model: iiwa14", "model: iiwa14\n  locked_joints: {joint7: 1e300}", ("robot", "locked_joints", "joint7"),
@@ -273,7 +273,7 @@ EXTREMES = SPEC.replace("""  joint_position:
     unit: deg
 """, "").replace("joint_torque: {max: 100}", (
     "joint_torque: {max: 1e6, allow_outside_urdf: true}\n"
-    "  joint_velocity: {max: 1e5, allow_outside_urdf: true}\n"
+    "  joint_velocity: {max: 1e4, allow_outside_urdf: true}\n"
     "  joint_acceleration: {max: 1e7}\n"
     "  cartesian: [{frame: tool, axis: z, min: -1e3, max: 1e3, max_velocity: 1e3, max_acceleration: 1e5}]"
 )).replace("kp: [100, 100, 200], kd: 20", "kp: 1e8, kd: 1e5, max_velocity: 1e3")

@@ -34,7 +34,7 @@ class JointPositionLimits(StrictModel):
 class JointVelocityLimits(StrictModel):
     """Joint velocity bounds |q̇| ≤ max."""
 
-    max: Annotated[ScalarOrVector, Range(0, 1e5, open=True)] = Field(description="in `unit` (rad/s or deg/s; m/s for a prismatic joint), one value or "
+    max: Annotated[ScalarOrVector, Range(0, 1e4, open=True)] = Field(description="in `unit` (rad/s or deg/s; m/s for a prismatic joint), one value or "
                                 "one per joint", examples=[1.5, [100, 110, 100, 130, 130, 180, 180]])
     unit: AngularVelocityUnit = Field("rad/s", description="unit of max", examples=["deg/s"])
     allow_outside_urdf: bool = Field(False, description=_ALLOW_OUTSIDE_URDF, examples=[False])

@@ -84,7 +84,7 @@ class ScenarioSpec(StrictModel):
     duration: Annotated[Number, DURATION] = Field(description="length of the run, s", examples=[2.0])
     initial_q: Annotated[NumberList, JOINT_VALUE] | None = Field(None, description="initial joint positions in `unit`, one per joint; "
                                          "default: the middle of the joint range", examples=[[0, 30, 0, -60, 0, 60, 0]])
-    initial_dq: Annotated[NumberList, Range(-1e5, 1e5)] | None = Field(None, description="initial joint velocities in `unit` per s, one per "
+    initial_dq: Annotated[NumberList, Range(-1e4, 1e4)] | None = Field(None, description="initial joint velocities in `unit` per s, one per "
                                           "joint; default: 0", examples=[[0, 0, 0, 10, 0, 0, 0]])
     unit: AngleUnit = Field("rad", description="unit of initial_q and initial_dq (per s)", examples=["deg"])
     disturbances: list[Disturbance] = Field(
