@@ -1,6 +1,6 @@
 """The compiled controller: a CasADi function for the QP data, the lexicographic solve, a safe fallback.
 
-    qp_data(q, dq, tau_ext, ref) → H, f, A, lba, uba, lbx, ubx, tau0, T, ddq0, Q, s0, S, p0, P
+    qp_data(q, dq, tau_ext, ref) → H, f, A, lba, uba, lbx, ubx, tau0, T, ddq0, Q, s0, S, p0, P, excess
 
 τ = tau0 + T x, q̈ = ddq0 + Q x (commanded: M⁻¹(τ − ν − g)), s = s0 + S x, and p0 + P x the task
 acceleration of an over-constrained lowest level (empty if there is none), where x solves the
@@ -26,7 +26,10 @@ from .tasks import ReferenceInput
 from .validate import ValidationReport, validate_spec
 
 STATUS_OK = 0  # every torque, joint and Cartesian bound holds (checked after the solve)
-STATUS_LIMITS_RELAXED = 1  # joint/Cartesian bounds violated as little as the torque limits allow
+# a joint/Cartesian bound is crossed: its acceleration bound violated as little as the torque
+# limits allow, or the state already beyond its position or velocity limit (after a push; the
+# bound then brings it back)
+STATUS_LIMITS_RELAXED = 1
 STATUS_NONFINITE_INPUT = -1  # fallback torque
 STATUS_SOLVER_FAILED = -2  # fallback torque
 STATUS_INVALID_OUTPUT = -3  # the solution was not finite or broke a torque limit: fallback torque
@@ -41,7 +44,10 @@ TORQUE_TOLERANCE = 1e-5  # relative to max(1, τ_max): what solver tolerances ma
 # A row is active (binding) at the solution when it is this close to its bound, relative to
 # max(1, |bound|): then an over-constrained lowest level's scaling needs the solve without bounds.
 ACTIVE_TOLERANCE = 1e-9
-DATA_OUTPUTS = ("H", "f", "A", "lba", "uba", "lbx", "ubx", "tau0", "T", "ddq0", "Q", "s0", "S", "p0", "P")
+# The state is beyond a bound's position or velocity limit if it is by more than this (rad, m,
+# rad/s or m/s): what "a bound crossed" means to the user.
+STATE_TOLERANCE = 1e-5
+DATA_OUTPUTS = ("H", "f", "A", "lba", "uba", "lbx", "ubx", "tau0", "T", "ddq0", "Q", "s0", "S", "p0", "P", "excess")
 
 
 @dataclass
@@ -53,7 +59,7 @@ class StepResult:
     scaling: np.ndarray  # one task scaling factor per priority level, highest first, in [0, 1] (1 = not scaled)
     status: int  # STATUS_* code; negative means the fallback torque was applied
     x: np.ndarray  # the QP solution, in scaled variables (empty for closed forms)
-    relaxed: list[str] = field(default_factory=list)  # bounds that gave way (status 1), in row order
+    relaxed: list[str] = field(default_factory=list)  # bounds crossed (status 1), in row order
 
     @property
     def ok(self) -> bool:
@@ -96,7 +102,9 @@ def data_function(problem: ControlProblem, law: ControlLaw, name: str = "qp_data
     P, p0 = ca.SX(0, nx), ca.SX(0, 1)
     if law.least_squares_task is not None:
         P, p0 = ca.mtimes(law.least_squares_task[0], D), law.least_squares_task[1]
-    outputs = [H, f, A, lba, uba, lbx, ubx, torque.offset, torque_matrix, ddq0, Q, law.scaling.offset, scaling_matrix, p0, P]
+    excess = problem.acceleration_rows.excess if qp is not None else ca.SX(0, 1)
+    outputs = [H, f, A, lba, uba, lbx, ubx, torque.offset, torque_matrix, ddq0, Q, law.scaling.offset, scaling_matrix, p0, P,
+               excess]
     inputs = [problem.q, problem.dq, problem.tau_ext, problem.ref]
     return ca.Function(
         name,
@@ -254,8 +262,9 @@ class Controller:
         status, relaxed = STATUS_OK, []
         if self.nx:
             check = check_bounds(self._structure.bound_rows, data["A"], data["lba"].ravel(), data["uba"].ravel(), x)
-            if not check.holds:
-                status, relaxed = STATUS_LIMITS_RELAXED, [self.bound_names[i] for i in check.violated]
+            crossed = set(check.violated) | set(np.flatnonzero(data["excess"].ravel() > STATE_TOLERANCE).tolist())
+            if crossed:
+                status, relaxed = STATUS_LIMITS_RELAXED, [self.bound_names[i] for i in sorted(crossed)]
         ddq = data["ddq0"].ravel() + data["Q"] @ x
         scaling = np.clip(data["s0"].ravel() + data["S"] @ x, 0.0, 1.0)
         if self.law.least_squares_task is not None:

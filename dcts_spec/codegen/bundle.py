@@ -20,7 +20,7 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from ..controller import ACTIVE_TOLERANCE, DATA_OUTPUTS, TORQUE_TOLERANCE, Controller
+from ..controller import ACTIVE_TOLERANCE, DATA_OUTPUTS, STATE_TOLERANCE, TORQUE_TOLERANCE, Controller
 from ..formulations.qp import BOUNDS, HARD
 from ..solve import BOUND_TOLERANCE, DAQP_SETTINGS
 from ..solve import lexicographic
@@ -118,7 +118,7 @@ def qp_data_function(controller: Controller, name: str) -> ca.Function:
     out = dict(zip(DATA_OUTPUTS, controller.data(*inputs)))
     outputs = [
         out["H"], out["f"], out["A"].T, ca.vertcat(out["lbx"], out["lba"]), ca.vertcat(out["ubx"], out["uba"]),
-        out["tau0"], out["T"], out["ddq0"], out["Q"], out["s0"], out["S"], out["p0"], out["P"],
+        out["tau0"], out["T"], out["ddq0"], out["Q"], out["s0"], out["S"], out["p0"], out["P"], out["excess"],
     ]
     return ca.Function(f"{name}_qp_data", inputs, outputs, ["q", "dq", "tau_ext", "ref"], list(C_DATA_OUTPUTS),
                        {"cse": True})
@@ -345,8 +345,10 @@ def _parameters_text(n: int, nref: int, big: str, tau_max, external_torque: str)
 def _status_text(name: str, big: str) -> str:
     rows = [
         ("0", "OK", "every torque limit and joint/Cartesian bound holds (checked after the solve)"),
-        ("1", "LIMITS_RELAXED", "the torque limits cannot hold every joint/Cartesian bound: those in"),
-        ("", "", "info->relaxed are violated as little as they allow (tasks come after)"),
+        ("1", "LIMITS_RELAXED", "a joint/Cartesian bound is crossed (those in info->relaxed): the torque"),
+        ("", "", "limits cannot hold it, and it is violated as little as they allow (tasks"),
+        ("", "", "come after); or the state is already beyond its position or velocity limit"),
+        ("", "", "(after a push), and the bound brings it back"),
         ("-1", "NONFINITE_INPUT", "an input was NaN or infinite"),
         ("-2", "SOLVER_FAILED", "the QP solver failed (also on non-finite QP data)"),
         ("-3", "INVALID_OUTPUT", "the solution was not finite or broke a torque limit"),
@@ -486,6 +488,7 @@ def generate_sources(
         "BOUNDS_END": (qp.rows_of(HARD).stop + nr) if qp is not None else 0,
         "BOUND_TOLERANCE": c_double(BOUND_TOLERANCE),
         "ACTIVE_TOLERANCE": c_double(ACTIVE_TOLERANCE),
+        "STATE_TOLERANCE": c_double(STATE_TOLERANCE),
         "PERIOD": repr(float(spec.controller.period)),
         "ITER_LIMIT": int(settings["iter_limit"]),
         "DAMPING": _fmt_list(damping),

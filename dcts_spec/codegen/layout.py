@@ -9,7 +9,7 @@ from __future__ import annotations
 import ctypes
 
 # Outputs of the generated qp_data, in the order the wrapper points `res` at them.
-C_DATA_OUTPUTS = ("H", "f", "A_rowmajor", "bl", "bu", "tau0", "T", "ddq0", "Q", "s0", "S", "p0", "P")
+C_DATA_OUTPUTS = ("H", "f", "A_rowmajor", "bl", "bu", "tau0", "T", "ddq0", "Q", "s0", "S", "p0", "P", "excess")
 
 
 def array_lengths(nx: int, na: int, nlevels: int, nref: int, nr: int, np_: int) -> dict[str, int]:
@@ -78,6 +78,7 @@ def workspace_fields(nq: int, nref: int, nx: int, na: int, nlevels: int, casadi_
         ("S", "double", n["nlevels"] * nxa, ""),
         ("p0", "double", n["np"], "over-constrained lowest level: task acceleration p0 + P x"),
         ("P", "double", n["np"] * nxa, ""),
+        ("excess", "double", n["nr"], "how far the state is beyond each bound's position or velocity limit"),
         ("x", "double", nxa, "the solution"),
         ("x_free", "double", nxa, "the solution without torque limits and bounds (p0 + P x)"),
         ("lba", "double", n["na"], "the cascade: row bounds (widened when relaxed)"),

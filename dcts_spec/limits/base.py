@@ -16,18 +16,23 @@ class AccelerationRows:
     lower: ca.SX  # (r)
     upper: ca.SX  # (r)
     names: list[str]
+    # How far the state already is beyond each row's position or velocity limit (rad, m, rad/s
+    # or m/s; 0 within): after a push the acceleration bound can hold while the joint is still
+    # outside its range, and a status must not call that "ok".
+    excess: ca.SX  # (r)
 
     @staticmethod
     def stack(parts: list["AccelerationRows"], n: int) -> "AccelerationRows":
         parts = [p for p in parts if p.names]
         if not parts:
-            return AccelerationRows(ca.SX(0, n), ca.SX(0, 1), ca.SX(0, 1), ca.SX(0, 1), [])
+            return AccelerationRows(ca.SX(0, n), ca.SX(0, 1), ca.SX(0, 1), ca.SX(0, 1), [], ca.SX(0, 1))
         return AccelerationRows(
             ca.vertcat(*[p.matrix for p in parts]),
             ca.vertcat(*[p.offset for p in parts]),
             ca.vertcat(*[p.lower for p in parts]),
             ca.vertcat(*[p.upper for p in parts]),
             [name for p in parts for name in p.names],
+            ca.vertcat(*[p.excess for p in parts]),
         )
 
     def __len__(self) -> int:

@@ -7,7 +7,7 @@ import casadi as ca
 from ..robot.model import CartesianBound
 from ..symbolic import SymbolicRobot
 from .base import AccelerationRows
-from .viability import acceleration_bounds
+from .viability import acceleration_bounds, state_excess
 
 
 def cartesian_rows(bounds: tuple[CartesianBound, ...], robot: SymbolicRobot, dt: float) -> AccelerationRows:
@@ -20,5 +20,6 @@ def cartesian_rows(bounds: tuple[CartesianBound, ...], robot: SymbolicRobot, dt:
         bias = ca.dot(d, robot.frame_bias_acceleration(b.frame)[0:3])
         c, c_dot = ca.dot(d, position), ca.mtimes(jacobian, robot.dq)
         lo, hi = acceleration_bounds(c, c_dot, b.c_min, b.c_max, b.v_max, float("inf"), b.a_max, dt)
-        parts.append(AccelerationRows(jacobian, bias, lo, hi, [f"cartesian:{b.frame}.{b.label}"]))
+        parts.append(AccelerationRows(jacobian, bias, lo, hi, [f"cartesian:{b.frame}.{b.label}"],
+                                      state_excess(c, c_dot, b.c_min, b.c_max, b.v_max)))
     return AccelerationRows.stack(parts, robot.nv)

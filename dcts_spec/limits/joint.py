@@ -7,7 +7,7 @@ import numpy as np
 
 from ..robot.model import JointLimits
 from .base import AccelerationRows
-from .viability import acceleration_bounds
+from .viability import acceleration_bounds, state_excess
 
 # Braking acceleration the viability bound assumes when the spec gives no joint acceleration limit.
 DEFAULT_BRAKING = 10.0  # rad/s² (or m/s² for prismatic joints)
@@ -16,7 +16,7 @@ DEFAULT_BRAKING = 10.0  # rad/s² (or m/s² for prismatic joints)
 def joint_rows(limits: JointLimits, q: ca.SX, dq: ca.SX, dt: float, names: list[str]) -> AccelerationRows:
     """One row per joint that has a finite position, velocity or acceleration bound."""
     n = q.shape[0]
-    rows, lower, upper, kept = [], [], [], []
+    rows, lower, upper, excess, kept = [], [], [], [], []
     for j in range(n):
         bounded = [limits.q_min[j], limits.q_max[j], limits.v_max[j], limits.a_max[j]]
         if not np.isfinite(bounded).any():
@@ -30,7 +30,9 @@ def joint_rows(limits: JointLimits, q: ca.SX, dq: ca.SX, dt: float, names: list[
         rows.append(selection)
         lower.append(lo)
         upper.append(hi)
+        excess.append(state_excess(q[j], dq[j], limits.q_min[j], limits.q_max[j], limits.v_max[j]))
         kept.append(f"joint:{names[j]}")
     if not kept:
         return AccelerationRows.stack([], n)
-    return AccelerationRows(ca.vertcat(*rows), ca.SX.zeros(len(kept)), ca.vertcat(*lower), ca.vertcat(*upper), kept)
+    return AccelerationRows(ca.vertcat(*rows), ca.SX.zeros(len(kept)), ca.vertcat(*lower), ca.vertcat(*upper), kept,
+                            ca.vertcat(*excess))

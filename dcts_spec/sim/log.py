@@ -28,7 +28,7 @@ class SimulationLog:
     ref: np.ndarray
     scaling: np.ndarray
     status: np.ndarray
-    relaxed: np.ndarray  # (steps, bounds): the joint/Cartesian bounds that gave way (status 1)
+    relaxed: np.ndarray  # (steps, bounds): the joint/Cartesian bounds crossed (status 1)
     bound_names: list[str] = field(default_factory=list)  # the columns of `relaxed`
     waypoint_times: np.ndarray = field(default_factory=lambda: np.zeros(0))  # NaN where not reached
     wall_time: float = 0.0  # s spent in the simulation loop (controller, physics, logging; not hooks)
