@@ -17,6 +17,7 @@ import typer
 
 from ..analysis.compare import markdown_table, write_comparison
 from ..analysis.outputs import atomic_directory, earlier_output, write_run
+from ..analysis.report import describe
 from ..files import OutputFolderError, check_writable
 from ..analysis.run import RunResult, analyze
 from ..formulations import FORMULATIONS
@@ -164,30 +165,3 @@ def _run(sim: Simulation, options: RunOptions, hooks: list[Hook]) -> RunResult:
     finally:
         progress.close()
     return analyze(sim, log)
-
-
-def describe(run: RunResult) -> str:
-    """A few lines about a run for the terminal."""
-    s = run.summary
-    speed = f" ({s['realtime_factor']:.3g}× real time)" if s["realtime_factor"] else ""
-    lines = [f"{s['spec']}: {s['formulation']}, {s['runtime']} runtime — {s['duration']:.3g} s simulated in "
-             f"{s['wall_time']:.3g} s{speed}"]
-    if not s["completed"]:
-        lines.append(f"  UNSTABLE   MuJoCo stopped the run at t = {s['diverged_at']:.4g} s")
-    lines.append(f"  limits     worst excess: position {s['max_joint_position_violation']:.3g} rad, velocity "
-                 f"{s['max_joint_velocity_violation']:.3g} rad/s ({100 * s['max_joint_velocity_violation_ratio']:.3g}% "
-                 f"of its limit), torque {s['max_torque_violation']:.3g} Nm, "
-                 f"Cartesian {s['max_cartesian_violation']:.3g} m")
-    lines.append(f"  solver     {s['solver_failures']} failures, {s['limits_relaxed']} steps with relaxed limits, "
-                 f"min scaling {s['min_scaling']:.3g}")
-    for name, r in s.get("relaxed_bounds", {}).items():
-        lines.append(f"  relaxed    {name}: {r['steps']} steps between t = {r['first']:.4g} s and {r['last']:.4g} s")
-    errors = ", ".join(f"{k} {v:.3g} (final {s['task_final_error'][k]:.3g})" for k, v in s["task_rms_error"].items())
-    lines.append(f"  tasks      RMS error: {errors}; priority-1 mean acceleration error "
-                 f"{s['primary_mean_acceleration_error']:.3g}")
-    lines.append(f"  energy     ∫acceleration energy {s['acceleration_energy_integral']:.4g}, kinetic peaks: "
-                 f"task {s['task_space_kinetic_energy_peak']:.3g} J, "
-                 f"null space {s['null_space_kinetic_energy_peak']:.3g} J")
-    if s["waypoints_total"]:
-        lines.append(f"  waypoints  {s['waypoints_reached']}/{s['waypoints_total']} reached")
-    return "\n".join(lines)
