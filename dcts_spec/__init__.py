@@ -1,7 +1,31 @@
 """dcts: declare prioritized torque control of a redundant arm in YAML; validate, compile, simulate."""
 
-from .codegen import compile_c
-from .controller import Controller, StepResult, build_controller
+from __future__ import annotations
+
+from importlib import import_module
+from typing import TYPE_CHECKING, Any
+
 from .spec import Spec, SpecError, load_spec
 
+if TYPE_CHECKING:
+    from .codegen import compile_c
+    from .controller import Controller, StepResult, build_controller
+
+# Names whose modules import CasADi and Pinocchio (~0.7 s): loaded on first use (PEP 562), so
+# that `import dcts_spec`, `dcts --help` and rejecting a broken spec stay fast.
+_LAZY = {"compile_c": ".codegen", "Controller": ".controller", "StepResult": ".controller",
+         "build_controller": ".controller"}
+
 __all__ = ["Controller", "Spec", "SpecError", "StepResult", "build_controller", "compile_c", "load_spec"]
+
+
+def __getattr__(name: str) -> Any:
+    if name not in _LAZY:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(import_module(_LAZY[name], __name__), name)
+    globals()[name] = value  # later lookups skip this function
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))

@@ -14,16 +14,19 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from functools import partial
 from pathlib import Path
-from typing import Annotated, Literal, Optional
+from typing import Annotated, Literal, Optional, get_args
 
 import typer
 from typer.core import TyperCommand, TyperGroup
 
-from .codegen.build import TARGETS
-from .formulations import FORMULATIONS
+from .choices import RUNTIMES, TARGETS
 from .phases import phase, reporting
-from .sim.runtime import RUNTIMES
 from .spec import SpecError
+from .spec.controller import Formulation
+
+# Heavy modules (CasADi, Pinocchio, MuJoCo) are imported inside the commands that need them:
+# `dcts --help`, `--version` and rejecting a broken spec take a fraction of a second.
+FORMULATIONS: tuple[str, ...] = get_args(Formulation)
 
 EPILOG = ("Outputs: every command that writes a folder takes -o/--out DIR; without it, compile writes "
           "build/<name>, simulate runs/<name> and compare runs/<name>-compare (<name>: the spec's `name`). "
@@ -63,7 +66,6 @@ app = typer.Typer(
 command = partial(app.command, cls=_Command)
 
 # Choices, listed in the help and checked by the parser (a bad value is a usage error, exit 2).
-Formulation = Literal[tuple(FORMULATIONS)]  # type: ignore[valid-type]
 Runtime = Literal[RUNTIMES]  # type: ignore[valid-type]
 Target = Literal[TARGETS]  # type: ignore[valid-type]
 
@@ -166,13 +168,15 @@ def validate(
     quiet: QuietOption = False,
 ) -> None:
     """Check spec files and summarize them; exit 1 if any has an error."""
-    from .controller import compile_check
-    from .validate import validate_file
+    from .spec import load_spec
 
     results, failed = [], False
     for file in files:
         try:
-            report = validate_file(file)
+            spec = load_spec(file)
+            from .validate import validate_spec  # Pinocchio and CasADi: only once a spec has parsed
+
+            report = validate_spec(spec)
         except SpecError as error:
             failed = True
             results.append({"file": str(file), "valid": False, "diagnostics": [d.to_dict() for d in error.diagnostics]})
@@ -181,6 +185,8 @@ def validate(
             continue
         result = report.to_dict()
         if check:
+            from .controller import compile_check
+
             with _feedback(quiet):
                 phase(f"compiling {report.spec.name} with every formulation")
                 result["formulations"] = compile_check(report)

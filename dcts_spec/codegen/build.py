@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
 
+from ..choices import TARGETS
 from ..files import OutputFolderError, check_writable, install
 from ..phases import building_controller, phase
 from ..controller import Controller
@@ -29,7 +30,6 @@ from .bundle import DAQP_VERSION, GENERATOR, GOLDEN_COUNT, HEAP_SENTINEL, Codege
 from .model import model_record
 
 CACHE_DIR = Path(os.environ.get("DCTS_CACHE", Path.home() / ".cache" / "dcts"))
-TARGETS = ("host", "cortex-m7")
 # What the golden-vector test prints (templates/test.c.in): its summary line and, built with
 # heap counting, the heap calls of init and of the steps.
 GOLDEN_SUMMARY = "golden vectors"

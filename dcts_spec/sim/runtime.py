@@ -7,6 +7,7 @@ from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
+from ..choices import RUNTIMES
 from ..controller import Controller, StepResult
 from ..robot.model import Robot
 from ..spec import Spec
@@ -14,8 +15,6 @@ from ..tasks import ReferenceInput
 
 if TYPE_CHECKING:
     from ..codegen import BundleCache
-
-RUNTIMES = ("c", "python")
 
 
 class Runtime(Protocol):
