@@ -10,7 +10,7 @@ import pinocchio as pin
 
 from .limits.naming import bound_text
 from .robot.model import Robot
-from .robot.resolve import resolve_robot
+from .robot.resolve import frame_candidates, resolve_robot
 from .spec import Diagnostic, Spec, SpecError, load_spec
 from .spec.errors import did_you_mean
 from .spec.tasks import TaskSpec
@@ -203,7 +203,7 @@ def _check_tasks(spec: Spec, robot: Robot) -> list[Diagnostic]:
             diags.append(src.diagnostic(at + ("name",), f"task name {task.name!r} is already used by tasks[{seen[task.name]}]"))
         seen.setdefault(task.name, i)
         if task.frame is not None and not robot.has_frame(task.frame):
-            diags.append(src.diagnostic(at + ("frame",), f"no frame {task.frame!r} in the robot{did_you_mean(task.frame, frames, 3)}"))
+            diags.append(src.diagnostic(at + ("frame",), f"no frame {task.frame!r} in the robot{frame_candidates(task.frame, frames, spec)}"))
         if task.type != "joint":
             continue
         unknown = [j for j in task_joints(task, robot) if j not in robot.joint_names]
@@ -262,12 +262,12 @@ def _check_scenario(spec: Spec, robot: Robot) -> list[Diagnostic]:
         where = at + ("disturbances", i)
         if d.type == "force":
             if not robot.has_frame(d.body):
-                diags.append(src.diagnostic(where + ("body",), f"no link or frame {d.body!r}{did_you_mean(d.body, frames, 3)}"))
+                diags.append(src.diagnostic(where + ("body",), f"no link or frame {d.body!r}{frame_candidates(d.body, frames, spec)}"))
         elif len(d.torque) != n:
             diags.append(src.diagnostic(where + ("torque",), f"{len(d.torque)} values for {n} joints"))
     for i, p in enumerate(sc.payloads):
         if not robot.has_frame(p.frame):
-            diags.append(src.diagnostic(at + ("payloads", i, "frame"), f"no frame {p.frame!r}{did_you_mean(p.frame, frames, 3)}"))
+            diags.append(src.diagnostic(at + ("payloads", i, "frame"), f"no frame {p.frame!r}{frame_candidates(p.frame, frames, spec)}"))
     sensing = sc.sensing
     for name in ("noise_std", "bias"):
         size = size_of(getattr(sensing, name))

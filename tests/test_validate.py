@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import difflib
 import json
 import math
 from pathlib import Path
@@ -10,6 +11,9 @@ import pytest
 
 from command_line import ROOT, dcts
 from dcts_spec.robot.builtin import example_robot_data_dir, iiwa14_urdf_path
+from dcts_spec.robot.describe import describe
+from dcts_spec.robot.resolve import LISTED_FRAMES
+from dcts_spec.spec import SpecError
 from dcts_spec.validate import validate_file
 
 SPECS = sorted(p.relative_to(ROOT).as_posix() for p in (ROOT / "specs").glob("**/*.yaml"))
@@ -157,3 +161,68 @@ def test_any_urdf_by_path(tmp_path: Path) -> None:
         report = validate_file(spec)
         assert report.robot.nv == n
         assert report.levels[0].dimension == 3
+
+
+def _errors(path: Path) -> dict[int | None, str]:
+    with pytest.raises(SpecError) as caught:
+        validate_file(path)
+    return {d.line: d.message for d in caught.value.errors}
+
+
+def _similarity(a: str, b: str) -> float:
+    return difflib.SequenceMatcher(None, a, b).ratio()
+
+
+@pytest.mark.parametrize("section, name, line", [
+    ("limits:\n  cartesian:\n    - {frame: FRAME, axis: z, min: 0.05}\n", "lnk7", 6),
+    ("", "gripper", 5),
+], ids=["cartesian_bound", "task"])
+def test_unknown_frame_lists_the_closest_frames_and_where_to_see_all(tmp_path: Path, section: str, name: str,
+                                                                      line: int) -> None:
+    """iiwa14 has 17 frames: an unknown frame's message names the closest few, nearest first,
+    and the command that lists them all."""
+    spec = tmp_path / "frames.yaml"
+    task_frame = "tool" if section else name
+    spec.write_text("version: 1\nname: frames\nrobot: {model: iiwa14}\n" + section.replace("FRAME", name)
+                    + f"tasks:\n  - {{name: reach, type: position, frame: {task_frame}, priority: 1, "
+                    "gains: {kp: 10, kd: 6}, reference: {position: [0.5, 0, 0.6]}}\n")
+    message = _errors(spec)[line]
+    frames = [f.name for f in describe("iiwa14").frames]
+    assert message.startswith(f"no frame {name!r}")
+    assert message.endswith("(`dcts describe iiwa14` lists them all)")
+    listed = message.split(f"closest of its {len(frames)} frames: ")[1].split(" (")[0].split(", ")
+    assert len(listed) == LISTED_FRAMES and set(listed) <= set(frames)
+    scores = [_similarity(name, f) for f in listed]
+    assert scores == sorted(scores, reverse=True)  # nearest first
+    assert min(scores) >= max(_similarity(name, f) for f in frames if f not in listed)  # the closest, not any
+
+
+def test_unknown_joint_lists_every_joint(tmp_path: Path) -> None:
+    spec = tmp_path / "joints.yaml"
+    spec.write_text("version: 1\nname: joints\nrobot: {model: iiwa14}\ntasks:\n"
+                    "  - {name: hold, type: joint, joints: [joint9], priority: 1, gains: {kp: 0, kd: 6}}\n")
+    assert _errors(spec)[5].endswith("; joints: joint1, joint2, joint3, joint4, joint5, joint6, joint7")
+
+
+SMALL_URDF = """\
+<robot name="small">
+  <link name="base"/>
+  <link name="arm"><inertial><mass value="1"/><inertia ixx="0.1" iyy="0.1" izz="0.1" ixy="0" ixz="0" iyz="0"/></inertial></link>
+  <joint name="shoulder" type="revolute"><parent link="base"/><child link="arm"/><axis xyz="0 0 1"/>
+    <limit lower="-1" upper="1" velocity="1" effort="10"/></joint>
+</robot>
+"""
+
+
+def test_unknown_frame_of_a_small_robot_lists_them_all(tmp_path: Path) -> None:
+    (tmp_path / "small.urdf").write_text(SMALL_URDF)
+    spec = tmp_path / "small.yaml"
+    for bound_frame, task_frame, line, wording in (("hand", "arm", 6, "no frame 'hand'"),
+                                                    ("arm", "hand", 8, "no frame 'hand' in the robot")):
+        spec.write_text(
+            "version: 1\nname: small\nrobot: {urdf: small.urdf}\n"
+            f"limits:\n  cartesian:\n    - {{frame: {bound_frame}, axis: z, min: -1}}\n"
+            f"tasks:\n  - {{name: reach, type: position, frame: {task_frame}, priority: 1, gains: {{kp: 10, kd: 6}}, "
+            "reference: {position: [0.5, 0, 0.6]}}\n"
+        )
+        assert _errors(spec)[line] == f"{wording}; frames: base, shoulder, arm"

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import difflib
 import os
 import sys
 from pathlib import Path
@@ -20,6 +21,7 @@ from .builtin import builtin_locked_joints, builtin_urdf_path, lock_joints
 from .model import CartesianBound, JointLimits, Robot
 
 AXIS_INDEX = {"x": 0, "y": 1, "z": 2}
+LISTED_FRAMES = 8  # an unknown frame's message lists this many candidates, the closest first
 
 
 def resolve_robot(spec: Spec) -> tuple[Robot, list[Diagnostic]]:
@@ -43,6 +45,25 @@ def resolve_robot(spec: Spec) -> tuple[Robot, list[Diagnostic]]:
     return robot, diags
 
 
+def frame_candidates(name: str, frames: list[str], spec: Spec) -> str:
+    """What follows `no frame 'x'`: a near-typo's correction, then the robot's frames; a long
+    list is cut to the closest few and says which command lists them all."""
+    frames = [f for f in frames if f != "universe"]  # Pinocchio's world frame: no task's or bound's
+    hint = did_you_mean(name, frames, n=3)
+    if len(frames) <= LISTED_FRAMES:
+        return f"{hint}; frames: {', '.join(frames)}"
+    closest = sorted(frames, key=lambda f: -difflib.SequenceMatcher(None, name, f).ratio())[:LISTED_FRAMES]
+    target = spec.robot.model or str(_urdf_path(spec))
+    return (f"{hint}; closest of its {len(frames)} frames: {', '.join(closest)} "
+            f"(`dcts describe {target}` lists them all)")
+
+
+def _urdf_path(spec: Spec) -> Path:
+    """The spec's URDF file (a relative path is the spec file's)."""
+    path = Path(spec.robot.urdf or "")
+    return path if path.is_absolute() else spec.base_dir / path
+
+
 def _load_model(spec: Spec, diags: list[Diagnostic]) -> tuple[pin.Model | None, Path]:
     src = spec.source
     if spec.robot.model is not None:
@@ -50,9 +71,7 @@ def _load_model(spec: Spec, diags: list[Diagnostic]) -> tuple[pin.Model | None, 
         locked = {**builtin_locked_joints(spec.robot.model), **spec.robot.locked_joints}
         where = ("robot", "model")
     else:
-        path = Path(spec.robot.urdf or "")
-        if not path.is_absolute():
-            path = spec.base_dir / path
+        path = _urdf_path(spec)
         locked = dict(spec.robot.locked_joints)
         where = ("robot", "urdf")
         if not path.is_file():
@@ -114,7 +133,7 @@ def _add_frames(spec: Spec, model: pin.Model, diags: list[Diagnostic]) -> None:
             diags.append(src.diagnostic(path, f"the robot already has a frame named {name!r}; choose another name"))
             continue
         if not model.existFrame(frame.parent):
-            hint = did_you_mean(frame.parent, [f.name for f in model.frames], n=3)
+            hint = frame_candidates(frame.parent, [f.name for f in model.frames], spec)
             diags.append(src.diagnostic(path + ("parent",), f"no link, joint or frame named {frame.parent!r}{hint}"))
             continue
         parent = model.frames[model.getFrameId(frame.parent)]
@@ -220,7 +239,7 @@ def _cartesian_bounds(spec: Spec, model: pin.Model, diags: list[Diagnostic]) -> 
     for i, c in enumerate(spec.limits.cartesian):
         at = ("limits", "cartesian", i)
         if not model.existFrame(c.frame):
-            diags.append(spec.source.diagnostic(at + ("frame",), f"no frame {c.frame!r}{did_you_mean(c.frame, names, n=3)}"))
+            diags.append(spec.source.diagnostic(at + ("frame",), f"no frame {c.frame!r}{frame_candidates(c.frame, names, spec)}"))
             continue
         if c.axis is not None:
             direction, shift = np.eye(3)[AXIS_INDEX[c.axis]], 0.0
@@ -228,7 +247,7 @@ def _cartesian_bounds(spec: Spec, model: pin.Model, diags: list[Diagnostic]) -> 
             direction, shift = np.asarray(c.normal, dtype=float) / np.linalg.norm(c.normal), 0.0
             if c.expressed_in not in (None, "world"):
                 if not model.existFrame(c.expressed_in):
-                    hint = did_you_mean(c.expressed_in, names, n=3)
+                    hint = frame_candidates(c.expressed_in, names, spec)
                     diags.append(spec.source.diagnostic(at + ("expressed_in",), f"no frame {c.expressed_in!r}{hint}"))
                     continue
                 frame = model.frames[model.getFrameId(c.expressed_in)]
