@@ -106,7 +106,7 @@ class ValidationReport:
         if np.isfinite(lim.a_max).any():
             lines.append(f"              |q̈| ≤ {fmt(lim.a_max, deg)} deg/s²")
         for b in robot.cartesian_bounds:
-            lines.append(f"              {b.c_min:.4g} ≤ {b.frame}.{b.label} ≤ {b.c_max:.4g} m"
+            lines.append(f"              {bound_text(b)}"
                          + ("" if b.axis is not None else f" (world normal {fmt(np.array(b.direction))})"))
         lines.append(f"  gravity     needs {self.gravity_torque_ratio * 100:.0f}% of the torque limit at the initial configuration")
         lines.extend(f"  {d}" for d in self.diagnostics)

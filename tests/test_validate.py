@@ -226,3 +226,18 @@ def test_unknown_frame_of_a_small_robot_lists_them_all(tmp_path: Path) -> None:
             "reference: {position: [0.5, 0, 0.6]}}\n"
         )
         assert _errors(spec)[line] == f"{wording}; frames: base, shoulder, arm"
+
+
+def test_summary_words_cartesian_bounds_like_the_run_summary(tmp_path: Path) -> None:
+    """One-sided bounds leave out the infinite side, with the unit on each number."""
+    spec = tmp_path / "bounded.yaml"
+    spec.write_text(
+        "version: 1\nname: bounded\nrobot: {model: iiwa14}\n"
+        "limits:\n  cartesian:\n    - {frame: tool, axis: z, min: 0.05}\n    - {frame: tool, axis: x, max: 0.9}\n"
+        "    - {frame: tool, axis: y, min: -0.5, max: 0.5}\n"
+        "tasks:\n  - {name: reach, type: position, frame: tool, priority: 1, gains: {kp: 10, kd: 6}, "
+        "reference: {position: [0.5, 0, 0.6]}}\n"
+    )
+    summary = validate_file(spec).summary()
+    bounds = [line.strip() for line in summary.splitlines() if "tool." in line]
+    assert bounds == ["0.05 m ≤ tool.z", "tool.x ≤ 0.9 m", "-0.5 m ≤ tool.y ≤ 0.5 m"]
