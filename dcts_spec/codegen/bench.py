@@ -22,6 +22,7 @@ import numpy as np
 import pinocchio
 
 from ..controller import STATUS_NAMES
+from ..phases import phase
 from ..spec import load_spec
 from ..tasks.cartesian import CartesianTask
 from .build import CACHE_DIR, _tail, compile_bundle, make_controller, run, section_size
@@ -104,9 +105,7 @@ def run_c_harness(exe: Path, states: list[State], work: Path, tag: str) -> dict:
 
 
 def callgrind_instructions(exe: Path, states: list[State], work: Path, name: str) -> float | None:
-    """Instructions per step (callgrind, counting only inside <name>_step)."""
-    if shutil.which("valgrind") is None:
-        return None
+    """Instructions per step (callgrind, counting only inside <name>_step; valgrind must be installed)."""
     states_file, out = work / "states_callgrind.bin", work / "times_callgrind.bin"
     _write_states(states_file, states)
     log = work / "callgrind.out"
@@ -134,7 +133,10 @@ def pinocchio_reference(controller, states: list[State], work: Path) -> dict:
     exe = CACHE_DIR / "pinocchio_bench" / key / "pinocchio_bench"
     (work / "pinocchio_bench.cpp").write_text(source)
     error = None
-    if prefix is not None and not exe.is_file():
+    building = prefix is not None and not exe.is_file()
+    phase("timing Pinocchio's dynamics terms" + (": building its C++ harness first (~20 s, once per Pinocchio "
+                                                 "version)" if building else ""))
+    if building:
         exe.parent.mkdir(parents=True, exist_ok=True)
         try:
             # The flags Pinocchio's CMake config exports; no -march=native: the harness must keep
@@ -229,20 +231,29 @@ def bench(spec_file: str | Path, formulation: str | None = None, states: int = 1
         bundle = work / "bundle"
         manifest = compile_bundle(spec, bundle, formulation=formulation).manifest
         t0 = time.perf_counter()
+        phase(f"generating {states} closed-loop states (the C step in the loop)")
         with load_bundle(bundle) as compiled:
             along = trajectory_states(controller, states, seed=seed, step=compiled.step)
+        phase(f"sampling {states} independent states")
         independent = StateSampler(controller, seed + 1).mixed(states, limit_fraction=0.15)
         generation_s = time.perf_counter() - t0
 
+        phase(f"timing the C step ({' '.join(NATIVE)}) on the closed-loop, then the independent states, best of "
+              f"{REPEATS} runs each")
         exe = build_c_harness(bundle, manifest, work)
         c_traj = run_c_harness(exe, along, work, "trajectory")
         c_rand = run_c_harness(exe, independent, work, "random")
-        py = python_runtime(controller, along[: min(python_states, len(along))])
+        python_along = along[: min(python_states, len(along))]
+        phase(f"timing the Python runtime on {len(python_along)} states")
+        py = python_runtime(controller, python_along)
         pin_ref = pinocchio_reference(controller, along, work)
-        # valgrind does not decode every -march=native instruction (AVX-512): count on baseline x86-64
-        baseline = build_c_harness(bundle, manifest, work, ["-O2"], "_baseline")
-        instructions = callgrind_instructions(baseline, along[: min(callgrind_states, len(along))], work,
-                                              manifest["name"])
+        instructions = None
+        if shutil.which("valgrind") is not None:
+            counted = along[: min(callgrind_states, len(along))]
+            phase(f"counting the instructions of a step with callgrind ({len(counted)} states)")
+            # valgrind does not decode every -march=native instruction (AVX-512): count on baseline x86-64
+            baseline = build_c_harness(bundle, manifest, work, ["-O2"], "_baseline")
+            instructions = callgrind_instructions(baseline, counted, work, manifest["name"])
         sizes = object_sizes(bundle, manifest, work)
 
     host = manifest.get("host", {})
