@@ -7,6 +7,7 @@ import numpy as np
 from ..robot.model import Robot
 from ..spec.tasks import TaskSpec
 from ..spec.types import as_list
+from ..limits.naming import joint_unit
 from ..spec.units import to_si
 from .base import ReferenceInput, Task, TaskTerms
 from .cartesian import CartesianTask, OrientationTask, PoseTask, PositionTask
@@ -41,10 +42,10 @@ def make_task(spec: TaskSpec, robot: Robot) -> Task:
     )
     if spec.type == "joint":
         names = task_joints(spec, robot)
+        indices = [robot.joint_names.index(j) for j in names]
         q = None if ref is None or ref.q is None else np.array(to_si(list(ref.q), ref.unit))
-        return JointTask(
-            spec.name, spec.priority, [robot.joint_names.index(j) for j in names], names, robot.nv, q=q, **common
-        )
+        return JointTask(spec.name, spec.priority, indices, names, robot.nv, q=q,
+                         units=[joint_unit(robot, j) for j in indices], **common)
     position = None if ref is None or ref.position is None else np.array(ref.position)
     rpy = None if ref is None or ref.rpy is None else np.array(to_si(list(ref.rpy), ref.unit))
     return CARTESIAN_TYPES[spec.type](

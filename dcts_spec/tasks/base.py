@@ -11,6 +11,11 @@ import numpy as np
 from ..symbolic import SymbolicRobot
 
 
+def unit_text(units: tuple[str, ...], suffix: str = "") -> str:
+    """The distinct units of some rows, in order: "m/s", or "m/s, rad/s" for a mix."""
+    return ", ".join(dict.fromkeys(u + suffix for u in units))
+
+
 @dataclass(frozen=True)
 class ReferenceInput:
     """A slice of the controller's run-time reference vector `ref`."""
@@ -86,13 +91,19 @@ class Task(ABC):
     def row_names(self) -> tuple[str, ...]:
         """Names of the task's rows (axes or joints), for logs and layouts."""
 
+    @property
+    @abstractmethod
+    def row_units(self) -> tuple[str, ...]:
+        """SI unit of each row's coordinate (m or rad), in the order of row_names."""
+
     def reference_inputs(self, offset: int) -> list[ReferenceInput]:
         """The slices of `ref` this task reads, starting at `offset`."""
         if not self.reference_is_input:
             return []
         fields = list(self.reference_fields())
         if self.feedforward:
-            fields += [("velocity", self.dim, "SI/s", self.row_names), ("acceleration", self.dim, "SI/s²", self.row_names)]
+            fields += [("velocity", self.dim, unit_text(self.row_units, "/s"), self.row_names),
+                       ("acceleration", self.dim, unit_text(self.row_units, "/s²"), self.row_names)]
         out = []
         for field, size, unit, components in fields:
             out.append(ReferenceInput(self.name, field, offset, size, unit, components))

@@ -48,6 +48,10 @@ class CartesianTask(Task):
     def row_names(self) -> tuple[str, ...]:
         return tuple(f"{self.name}.{a}" for a in self.axes)
 
+    @property
+    def row_units(self) -> tuple[str, ...]:
+        return tuple("m" if a in TRANSLATION else "rad" for a in self.axes)
+
     def constant_reference(self) -> dict[str, np.ndarray]:
         out = {}
         if self.position is not None:

@@ -6,17 +6,18 @@ import casadi as ca
 import numpy as np
 
 from ..symbolic import SymbolicRobot
-from .base import Task
+from .base import Task, unit_text
 
 
 class JointTask(Task):
     """Selected joints driven to q_d (or only damped): J is a selection matrix, J̇q̇ = 0."""
 
     def __init__(self, name: str, priority: int, joint_indices: list[int], joint_names: list[str], nv: int,
-                 q: np.ndarray | None = None, **kwargs):
+                 q: np.ndarray | None = None, units: list[str] | None = None, **kwargs):
         super().__init__(name, priority, **kwargs)
         self.joint_indices = list(joint_indices)
         self.joint_names = list(joint_names)
+        self.units = tuple(units) if units is not None else ("rad",) * len(self.joint_indices)
         self.nv = nv
         self.q = None if q is None else np.asarray(q, dtype=float)
 
@@ -28,8 +29,12 @@ class JointTask(Task):
     def row_names(self) -> tuple[str, ...]:
         return tuple(f"{self.name}.{j}" for j in self.joint_names)
 
+    @property
+    def row_units(self) -> tuple[str, ...]:
+        return self.units
+
     def reference_fields(self):
-        return [("q", self.dim, "rad", tuple(self.joint_names))]
+        return [("q", self.dim, unit_text(self.units), tuple(self.joint_names))]
 
     def constant_reference(self) -> dict[str, np.ndarray]:
         return {} if self.q is None else {"q": self.q}
