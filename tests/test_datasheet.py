@@ -3,11 +3,21 @@ sign conventions; the README's integration example compiles against the bundle."
 
 from __future__ import annotations
 
+import math
+import re
+import shutil
+import subprocess
 from pathlib import Path
 
+import numpy as np
+import pytest
+
+from dcts_spec.codegen import compile_bundle
 from dcts_spec.controller import Controller
 from dcts_spec.spec import load_spec
 from dcts_spec.validate import validate_spec
+
+MINIMAL = Path(__file__).resolve().parents[1] / "specs" / "minimal.yaml"
 
 # A revolute and a prismatic joint: units differ per joint (rad, m).
 SLIDER_URDF = """\
@@ -49,3 +59,158 @@ def test_reference_units_are_real_units(tmp_path):
         ("reach", "velocity"): "m/s, rad/s", ("reach", "acceleration"): "m/s², rad/s²",
         ("posture", "q"): "rad, m", ("posture", "velocity"): "rad/s, m/s", ("posture", "acceleration"): "rad/s², m/s²",
     }
+
+
+# -- the header of a compiled spec -----------------------------------------------------------------
+
+SHEET_SPEC = """\
+version: 1
+name: sheet
+robot:
+  model: iiwa14
+  frames:
+    table: {parent: base, xyz: [0, 0, 0.2]}
+limits:
+  joint_position: {min: [-165, -115, -165, -115, -165, -115, -170], max: [165, 115, 165, 115, 165, 115, 170], unit: deg}
+  joint_velocity: {max: [100, 110, 100, 130, 130, 180, 180], unit: deg/s}
+  joint_acceleration: {max: 1000, unit: deg/s^2}
+  joint_torque: {max: [100, 100, 80, 80, 60, 40, 40]}
+  cartesian:
+    - {frame: tool, axis: z, min: 0.1}
+    - {frame: tool, normal: [0, 0, 2], expressed_in: table, min: -0.15, max: 1.3, max_velocity: 0.5, max_acceleration: 4}
+tasks:
+  - {name: reach, type: pose, frame: tool, axes: [x, y, z, rz], priority: 1,
+     gains: {kp: [100, 100, 120, 30], kd: 20, max_velocity: 0.3}, reference: {input: true, feedforward: true}}
+  - {name: point, type: orientation, frame: tool, axes: [rx, ry], priority: 2, gains: {kp: 50, kd: [14, 15]},
+     reference: {rpy: [180, 0, 0], unit: deg}}
+  - {name: posture, type: joint, priority: 3, gains: {kp: 10, kd: 6}, reference: {q: [0, 0.5, 0, -1, 0, 1, 0]}}
+"""
+JOINTS = [f"joint{k}" for k in range(1, 8)]
+# What the spec above says, in SI, written out here (not taken from the compiler).
+EXPECTED_GAINS = {  # task: (kp per axis, kd per axis, max_velocity text)
+    "reach": ([100, 100, 120, 30], [20] * 4, "0.3 (the norm of (kp/kd) dx over axes in m/s and rad/s)"),
+    "point": ([50, 50], [14, 15], "none"),
+    "posture": ([10] * 7, [6] * 7, "none"),
+}
+EXPECTED_JOINTS = {  # joint: (q min, q max, |dq| max, |ddq| max, |tau| max)
+    name: (-math.radians(p), math.radians(p), math.radians(v), math.radians(1000), t)
+    for name, p, v, t in zip(JOINTS, [165, 115, 165, 115, 165, 115, 170], [100, 110, 100, 130, 130, 180, 180],
+                             [100, 100, 80, 80, 60, 40, 40])
+}
+JOINT_UNITS = ("rad", "rad", "rad/s", "rad/s²", "Nm")
+
+
+@pytest.fixture(scope="module")
+def sheet(tmp_path_factory) -> tuple[Path, str]:
+    """The spec above compiled without building: (bundle directory, header text)."""
+    folder = tmp_path_factory.mktemp("sheet")
+    (folder / "sheet.yaml").write_text(SHEET_SPEC)
+    compile_bundle(folder / "sheet.yaml", folder / "bundle", build=False)
+    return folder / "bundle", (folder / "bundle" / "sheet.h").read_text()
+
+
+def parse_values(text: str) -> list[float]:
+    """"100" or "[50, 60]" as floats."""
+    return [float(v) for v in text.strip("[]").split(",")]
+
+
+def test_header_lists_every_task_gain_with_units(sheet):
+    _, header = sheet
+    blocks = re.findall(r"^ \*   (\w+): priority (\d+), .*\n \*     kp = (\S+|\[[^\]]*\]) 1/s², kd = (\S+|\[[^\]]*\]) 1/s, "
+                        r"max_velocity = (.*)\n \*     reference: (.*)$", header, re.M)
+    assert [b[0] for b in blocks] == list(EXPECTED_GAINS)
+    for name, priority, kp, kd, saturation, _ in blocks:
+        want_kp, want_kd, want_saturation = EXPECTED_GAINS[name]
+        for got, want in ((parse_values(kp), want_kp), (parse_values(kd), want_kd)):
+            assert np.allclose(np.broadcast_to(got, len(want)), want), (name, got, want)
+        assert saturation == want_saturation
+    references = {b[0]: b[5] for b in blocks}
+    assert references["reach"] == "run time, ref[0..13], with velocity and acceleration feed-forward"
+    assert references["point"] == "compiled, rpy = [3.14159, 0, 0] rad (world)"
+    assert references["posture"] == "compiled, q = [0, 0.5, 0, -1, 0, 1, 0] rad"
+
+
+def test_header_lists_every_joint_limit_with_units(sheet):
+    _, header = sheet
+    rows = {}
+    for line in header.splitlines():
+        cells = re.fullmatch(r" \*   (joint\d)\s+" + r"\s+".join([r"(-?[\d.e+-]+) (\S+)"] * 5), line)
+        if cells:
+            rows[cells.group(1)] = cells.groups()[1:]
+    assert list(rows) == JOINTS
+    for name, cells in rows.items():
+        values, units = [float(v) for v in cells[::2]], cells[1::2]
+        assert units == JOINT_UNITS, name
+        assert np.allclose(values, EXPECTED_JOINTS[name], rtol=1e-5), (name, values)
+
+
+def test_header_lists_cartesian_bounds_with_frame_direction_and_offsets(sheet):
+    _, header = sheet
+    bounds = re.findall(r"^ \*   (\S+): frame (\w+), d = \[([^\]]*)\].*\n \*     (.*)$", header, re.M)
+    assert [(b[0], b[1]) for b in bounds] == [("tool.z", "tool"), ("tool.plane1", "tool")]
+    assert np.allclose(parse_values(bounds[0][2]), [0, 0, 1]) and np.allclose(parse_values(bounds[1][2]), [0, 0, 1])
+    assert bounds[0][3] == "0.1 m ≤ d.p; speed: no limit; braking at 5 m/s²"
+    # the plane given in `table` (0.2 m above the world's origin): its offsets in the world
+    assert bounds[1][3] == "0.05 m ≤ d.p ≤ 1.5 m; |d.v| ≤ 0.5 m/s; braking at 4 m/s²"
+    assert "normal [0, 0, 2] in frame table" in header
+
+
+def test_header_reference_layout_has_real_units(sheet):
+    _, header = sheet
+    layout = dict(re.findall(r"^ \*   (ref\[[\d.]+\])\s+task reach, (.*)$", header, re.M))
+    assert layout == {
+        "ref[0..2]": "position (m): x, y, z",
+        "ref[3..5]": "rpy (rad): roll, pitch, yaw",
+        "ref[6..9]": "velocity (m/s: reach.x, reach.y, reach.z; rad/s: reach.rz)",
+        "ref[10..13]": "acceleration (m/s²: reach.x, reach.y, reach.z; rad/s²: reach.rz)",
+    }
+    assert "SI/s" not in header
+
+
+def test_header_states_units_signs_and_timing(sheet):
+    _, header = sheet
+    assert re.search(r"tau\[7\]\s+output: joint torques to apply \(Nm, gravity included\)", header)
+    assert re.search(r"q\[7\]\s+joint positions \(rad\)", header) and re.search(r"dq\[7\]\s+joint velocities \(rad/s\)", header)
+    assert "the torque the environment applies on the joints" in header
+    assert "M(q) ddq + nu(q, dq) + g(q) = tau + tau_ext" in header
+    assert "`dcts bench sheet.yaml` times sheet_step" in header
+    assert re.search(r"Sizes +NQ 7, NREF 14, NX \d+, NA \d+, NLEVELS 3, NR \d+, NP \d+; workspace \d+ bytes", header)
+
+
+def test_tau_ext_sign_is_the_headers(tmp_path):
+    """M ddq + nu + g = tau + tau_ext: with the accelerations unchanged (osc: no limits, the same
+    task accelerations), a measured tau_ext the environment applies is taken off the torque."""
+    (tmp_path / "sheet.yaml").write_text(SHEET_SPEC.replace("limits:", "controller: {formulation: osc}\nlimits:", 1))
+    spec = load_spec(tmp_path / "sheet.yaml")
+    controller = Controller(spec, validate_spec(spec).robot)
+    q, dq = np.array([0.1, 0.5, -0.2, -1.2, 0.3, 0.9, 0.1]), np.full(7, 0.05)
+    ref, tau_ext = np.concatenate([[0.5, 0.0, 0.6, 0, 0, 0], np.zeros(8)]), np.array([3.0, -2.0, 1.0, 0.5, -0.5, 0.2, 0.1])
+    free, pushed = controller.step(q, dq, np.zeros(7), ref), controller.step(q, dq, tau_ext, ref)
+    np.testing.assert_allclose(pushed.tau - free.tau, -tau_ext, atol=1e-9)
+
+
+# -- the README's integration example --------------------------------------------------------------
+
+
+def integration_example(readme: str) -> str:
+    return re.search(r"## Integration\n.*?```c\n(.*?)```", readme, re.S).group(1)
+
+
+@pytest.mark.parametrize("formulation", ["dcts", "osc"])
+def test_readme_integration_example_compiles(sheet, tmp_path, formulation):
+    """The README's loop compiles against the bundle's header (a QP spec with references, and a closed
+    form); the platform functions it declares are the integrator's."""
+    if formulation == "dcts":
+        bundle = sheet[0]
+    else:
+        (tmp_path / "minimal.yaml").write_text(MINIMAL.read_text())
+        bundle = tmp_path / "bundle"
+        compile_bundle(tmp_path / "minimal.yaml", bundle, formulation=formulation, build=False)
+    example = integration_example((bundle / "README.md").read_text())
+    assert 15 <= len(example.strip().splitlines()) <= 35
+    source = tmp_path / "example.c"
+    source.write_text(example)
+    compiler = shutil.which("gcc") or shutil.which("cc")
+    done = subprocess.run([compiler, "-std=c99", "-Wall", "-Wextra", "-Wpedantic", "-Werror", "-fsyntax-only",
+                           f"-I{bundle}", str(source)], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr

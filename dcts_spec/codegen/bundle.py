@@ -26,7 +26,9 @@ from ..solve import BOUND_TOLERANCE, DAQP_SETTINGS
 from ..solve import lexicographic
 from ..spec import Spec
 from .layout import C_DATA_OUTPUTS, array_lengths, casadi_work_lengths, header_fields, workspace_fields, workspace_struct
-from .model import describe_changes, model_record
+from .datasheet import (conventions_text, fmt_list, gains_text, limits_text, model_texts, parameters_text,
+                        ref_layout_text, sizes_text, status_text, timing_text)
+from .model import model_record
 from .states import State, golden_states
 
 GENERATOR = "dcts-spec"
@@ -307,80 +309,7 @@ class BundleSources:
     manifest: dict
 
 
-def _ref_layout_text(controller: Controller, big: str) -> tuple[str, str]:
-    layout = controller.ref_layout
-    if not layout:
-        return " *   (empty: every reference is a constant of the spec)", "/* (none) */\n"
-    lines, macros = [], []
-    for r in layout:
-        last = r.offset + r.size - 1
-        span = f"ref[{r.offset}]" if r.size == 1 else f"ref[{r.offset}..{last}]"
-        lines.append(f" *   {span:<14} task {r.task}, {r.field} ({r.unit}): {', '.join(r.components)}")
-        macro = re.sub(r"[^A-Za-z0-9]", "_", f"{big}_REF_{r.task}_{r.field}").upper()
-        macros.append(f"#define {macro} {r.offset} /* {r.size} values */")
-    return "\n".join(lines), "\n".join(macros) + "\n"
-
-
 HEAP_SENTINEL = "heap bytes measured by `make heapcheck` (see manifest.json)"
-
-
-def _table(rows: list[tuple[str, str]], indent: str = " *   ") -> str:
-    width = max(len(a) for a, _ in rows) + 2
-    return "\n".join(f"{indent}{a:<{width}}{b}".rstrip() for a, b in rows)
-
-
-def _parameters_text(n: int, nref: int, big: str, tau_max, external_torque: str) -> str:
-    ignored = " (ignored: external_torque is 'ignored')" if external_torque != "measured" else ""
-    return _table([
-        (f"q[{n}]", "joint positions (rad)"),
-        (f"dq[{n}]", "joint velocities (rad/s)"),
-        (f"tau_ext[{n}]", f"measured external joint torques (Nm); NULL means zero{ignored}"),
-        (f"ref[{nref}]", f"run-time references, layout below; may be NULL when {big}_NREF is 0"),
-        (f"tau[{n}]", "output: joint torques to apply (gravity included), always finite and"),
-        ("", f"within |tau| <= tau_max = {_fmt_list(tau_max)} Nm"),
-        ("info", "optional (may be NULL): commanded acceleration, task scalings, QP solution"),
-    ])
-
-
-def _status_text(name: str, big: str) -> str:
-    rows = [
-        ("0", "OK", "every torque limit and joint/Cartesian bound holds (checked after the solve)"),
-        ("1", "LIMITS_RELAXED", "a joint/Cartesian bound is crossed (those in info->relaxed): the torque"),
-        ("", "", "limits cannot hold it, and it is violated as little as they allow (tasks"),
-        ("", "", "come after); or the state is already beyond its position or velocity limit"),
-        ("", "", "(after a push), and the bound brings it back"),
-        ("-1", "NONFINITE_INPUT", "an input was NaN or infinite"),
-        ("-2", "SOLVER_FAILED", "the QP solver failed (also on non-finite QP data)"),
-        ("-3", "INVALID_OUTPUT", "the solution was not finite or broke a torque limit"),
-        ("-4", "NOT_INITIALIZED", f"{name}_init was not called or failed"),
-        ("-5", "BAD_ARGUMENT", "ws, q, dq or tau is NULL: nothing was written"),
-    ]
-    return _table([(f"{code:>2}  {big}_STATUS_{label}" if label else "", text) for code, label, text in rows],
-                  indent=" *  ")
-
-
-def _fmt_list(values) -> str:
-    return "[" + ", ".join(f"{v:g}" for v in values) + "]"
-
-
-def _model_texts(model: dict) -> tuple[str, str]:
-    """The header's and the README's note on the robot model (modified or the spec's own)."""
-    if not model["modified"]:
-        text = f"the spec's robot (model SHA-256 {model['sha256']})"
-        return text, text
-    changes = describe_changes(model.get("changes", {}))
-    header = (
-        f"MODIFIED, not the spec's robot: {changes};\n"
-        f" *                model SHA-256 {model['sha256']}\n"
-        f" *                (the spec's robot: {model['spec_model_sha256']}).\n"
-        f" *                Generated for this model (model mismatch); the spec SHA-256 above is unchanged."
-    )
-    readme = (
-        f"**modified**, not the spec's robot: {changes}; model SHA-256 `{model['sha256']}` (the spec's "
-        f"robot: `{model['spec_model_sha256']}`). The controller was generated for this model (model "
-        "mismatch); the spec's SHA-256 is unchanged."
-    )
-    return header, readme
 
 
 def _golden_tolerances(formulation: str) -> dict[str, str]:
@@ -424,13 +353,13 @@ def generate_sources(
     digest = spec_digest(spec, spec_bytes)
     spec_file = Path(spec.source.file).name if spec.source.file else "<spec>"
     model = model or model_record(controller.robot, controller.robot)
-    model_header, model_readme = _model_texts(model)
+    model_header, model_readme = model_texts(model)
 
     settings = daqp_settings()
     work = generate_casadi(controller, name, directory)
     length = array_lengths(nx, na, levels, nref, nr, npls)
     work_length = casadi_work_lengths(work)
-    layout_text, layout_macros = _ref_layout_text(controller, big)
+    layout_text, layout_macros = ref_layout_text(controller, big)
     fields = workspace_fields(n, nref, nx, na, levels, work, nr, npls)
     workspace_bytes = ctypes.sizeof(workspace_struct(fields, solver_bytes))
     if nx:
@@ -446,8 +375,13 @@ def generate_sources(
         init_short = "Allocates nothing (closed form)."
         daqp_note = " (closed-form law: no QP solver)"
     values = {
-        "PARAMETERS": _parameters_text(n, nref, big, tau_max, spec.controller.external_torque),
-        "STATUS_LIST": _status_text(name, big),
+        "PARAMETERS": parameters_text(controller, big),
+        "STATUS_LIST": status_text(name, big),
+        "CONVENTIONS": conventions_text(controller),
+        "GAINS": gains_text(controller),
+        "LIMITS": limits_text(controller),
+        "TIMING": timing_text(name, spec_file),
+        "SIZES": sizes_text(controller, levels, nr, npls, workspace_bytes),
         "name": name,
         "NAME": big,
         "GUARD": f"{big}_H",
@@ -491,7 +425,7 @@ def generate_sources(
         "STATE_TOLERANCE": c_double(STATE_TOLERANCE),
         "PERIOD": repr(float(spec.controller.period)),
         "ITER_LIMIT": int(settings["iter_limit"]),
-        "DAMPING": _fmt_list(damping),
+        "DAMPING": fmt_list(damping),
         "REF_LAYOUT": layout_text,
         "REF_MACROS": layout_macros,
         "INIT_NOTE": init_note,

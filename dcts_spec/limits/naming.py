@@ -12,10 +12,10 @@ import numpy as np
 from ..robot.model import CartesianBound, Robot
 
 
-def interval_text(name: str, lower: float, upper: float, unit: str) -> str:
+def interval_text(name: str, lower: float, upper: float, unit: str, digits: int = 4) -> str:
     """`lower unit ≤ name ≤ upper unit`, leaving out a side that is infinite."""
-    lo = f"{lower:.4g} {unit} ≤ " if np.isfinite(lower) else ""
-    hi = f" ≤ {upper:.4g} {unit}" if np.isfinite(upper) else ""
+    lo = f"{lower:.{digits}g} {unit} ≤ " if np.isfinite(lower) else ""
+    hi = f" ≤ {upper:.{digits}g} {unit}" if np.isfinite(upper) else ""
     return f"{lo}{name}{hi}"
 
 

@@ -1,0 +1,298 @@
+"""The prose of a bundle's header and README: a datasheet of the compiled controller.
+
+Sizes, units and sign conventions, the reference layout with each entry's unit, every compiled
+task gain and limit with its unit, statuses, the robot model and where timing is measured. Each
+function returns text for one template marker (header lines start with " *").
+"""
+
+from __future__ import annotations
+
+import textwrap
+
+import numpy as np
+
+from ..controller import Controller
+from ..limits.joint import DEFAULT_BRAKING
+from ..limits.naming import interval_text, joint_unit
+from ..tasks import JointTask, Task
+from ..tasks.base import unit_text
+from .model import describe_changes
+
+DIGITS = 6  # significant digits of the numbers in the header
+
+
+def number(value: float) -> str:
+    return f"{value:.{DIGITS}g}"
+
+
+def fmt_list(values) -> str:
+    return "[" + ", ".join(number(v) for v in values) + "]"
+
+
+def table(rows: list[tuple[str, str]], indent: str = " *   ") -> str:
+    width = max(len(a) for a, _ in rows) + 2
+    return "\n".join(f"{indent}{a:<{width}}{b}".rstrip() for a, b in rows)
+
+
+def columns(rows: list[list[str]], indent: str = " *   ") -> str:
+    """Rows of cells, each column as wide as its widest cell."""
+    widths = [max(len(row[k]) for row in rows) + 2 for k in range(len(rows[0]))]
+    return "\n".join((indent + "".join(f"{c:<{w}}" for c, w in zip(row, widths))).rstrip() for row in rows)
+
+
+def wrap(text: str, indent: str = " * ", width: int = 100) -> list[str]:
+    """Comment lines of at most `width` characters (words are not broken)."""
+    return textwrap.wrap(text, width, initial_indent=indent, subsequent_indent=indent, break_long_words=False,
+                         break_on_hyphens=False)
+
+
+def joint_units(controller: Controller) -> list[str]:
+    """"rad" or "m" per joint, in the order of q."""
+    return [joint_unit(controller.robot, j) for j in range(controller.n)]
+
+
+def _tasks(controller: Controller) -> dict[str, Task]:
+    return {t.name: t for level in controller.problem.levels for t in level.tasks}
+
+
+# -- inputs and conventions ------------------------------------------------------------------------
+
+
+def _joint_unit_text(units: list[str], suffix: str = "") -> str:
+    if "m" not in units:
+        return "rad" + suffix
+    if "rad" not in units:
+        return "m" + suffix
+    return f"rad{suffix}, m{suffix} for a prismatic joint"
+
+
+def parameters_text(controller: Controller, big: str) -> str:
+    """The arguments of <name>_step."""
+    n, nref = controller.n, controller.ref_size
+    units = joint_units(controller)
+    torque = "Nm" if "m" not in units else "Nm, N for a prismatic joint"
+    ignored = " (ignored: external_torque is 'ignored')" if controller.spec.controller.external_torque != "measured" else ""
+    return table([
+        (f"q[{n}]", f"joint positions ({_joint_unit_text(units)})"),
+        (f"dq[{n}]", f"joint velocities ({_joint_unit_text(units, '/s')})"),
+        (f"tau_ext[{n}]", f"external joint torques ({torque}), see Conventions; NULL means zero{ignored}"),
+        (f"ref[{nref}]", f"run-time references, layout below; may be NULL when {big}_NREF is 0"),
+        (f"tau[{n}]", f"output: joint torques to apply ({torque}, gravity included), always finite and"),
+        ("", f"within |tau| <= tau_max = {fmt_list(controller.tau_max)}"),
+        ("info", "optional (may be NULL): commanded acceleration, task scalings, QP solution"),
+    ])
+
+
+def conventions_text(controller: Controller) -> str:
+    """Units, signs and frames of the inputs and the output."""
+    units = joint_units(controller)
+    kinds = ", ".join(f"{name} {u}" for name, u in zip(controller.robot.joint_names, units))
+    measured = controller.spec.controller.external_torque == "measured"
+    return "\n".join([
+        " *   Units      SI. Joints in the order of q, each in its own unit (prismatic: m, m/s, N):",
+        *wrap(kinds, " *              "),
+        " *   Signs      q, dq, tau and tau_ext are positive along the joint's axis in the URDF.",
+        " *   tau        the whole joint torque to command: gravity, Coriolis and the tasks included",
+        " *              (add nothing to it).",
+        " *   tau_ext    the torque the environment applies on the joints (a contact, a hand pushing):",
+        " *              M(q) ddq + nu(q, dq) + g(q) = tau + tau_ext, so pushing a link along +q gives",
+        " *              tau_ext > 0, and a force F (N) at a frame gives tau_ext = J(q)^T F. From joint",
+        " *              torque sensors: tau_ext = M(q) ddq + nu + g - tau_sensed (model minus measured).",
+        (" *              The tasks and limits use it: an estimate's error acts as a disturbance."
+         if measured else
+         " *              Not used: the spec's external_torque is 'ignored' (the controller assumes 0)."),
+        " *   Cartesian  positions, plane normals and offsets in the world frame (the URDF's root),",
+        " *              m; orientations as roll, pitch, yaw in rad, R = Rz(yaw) Ry(pitch) Rx(roll).",
+        f" *   Period     {controller.spec.controller.period:g} s: the limits are shaped for it; call the step at this rate.",
+    ])
+
+
+def sizes_text(controller: Controller, levels: int, nr: int, npls: int, workspace_bytes: int) -> str:
+    return (f"NQ {controller.n}, NREF {controller.ref_size}, NX {controller.nx}, NA {controller.na}, NLEVELS {levels}, "
+            f"NR {nr}, NP {npls}; workspace {workspace_bytes} bytes")
+
+
+# -- references ------------------------------------------------------------------------------------
+
+
+def component_units(task: Task, unit: str, size: int) -> list[str]:
+    """The unit of each entry of a reference slice whose unit text is `unit` (tasks.base.unit_text):
+    one unit for all, or, for a mix, per task row (m or rad) in the order unit_text lists them."""
+    distinct = unit.split(", ")
+    if len(distinct) == 1:
+        return distinct * size
+    order = list(dict.fromkeys(task.row_units))
+    return [distinct[order.index(u)] for u in task.row_units]
+
+
+def ref_layout_text(controller: Controller, big: str) -> tuple[str, str]:
+    """The header's layout lines (each entry's unit) and the REF offset macros."""
+    layout = controller.ref_layout
+    if not layout:
+        return " *   (empty: every reference is a constant of the spec)", "/* (none) */\n"
+    tasks = _tasks(controller)
+    lines, macros = [], []
+    for r in layout:
+        last = r.offset + r.size - 1
+        span = f"ref[{r.offset}]" if r.size == 1 else f"ref[{r.offset}..{last}]"
+        units = component_units(tasks[r.task], r.unit, r.size)
+        if len(set(units)) == 1:
+            what = f"{r.field} ({units[0]}): {', '.join(r.components)}"
+        else:
+            groups = {u: [c for c, cu in zip(r.components, units) if cu == u] for u in dict.fromkeys(units)}
+            what = f"{r.field} ({'; '.join(f'{u}: ' + ', '.join(cs) for u, cs in groups.items())})"
+        lines.append(f" *   {span:<14} task {r.task}, {what}")
+        macro = "".join(c if c.isalnum() else "_" for c in f"{big}_REF_{r.task}_{r.field}").upper()
+        macros.append(f"#define {macro} {r.offset} /* {r.size} values */")
+    return "\n".join(lines), "\n".join(macros) + "\n"
+
+
+# -- gains -----------------------------------------------------------------------------------------
+
+
+def _values(values: np.ndarray) -> str:
+    """One number when every axis has it, else one per axis."""
+    values = np.asarray(values, dtype=float)
+    return number(values[0]) if np.all(values == values[0]) else fmt_list(values)
+
+
+def _task_subject(task: Task, kind: str) -> str:
+    if isinstance(task, JointTask):
+        return f"joint task on {', '.join(task.joint_names)}"
+    rotation = [a for a in task.axes if a.startswith("r")]
+    own = " (rotation axes: the frame's own)" if rotation and len(rotation) < 3 else ""
+    return f"{kind} of frame {task.frame}, axes {', '.join(task.axes)}{own}"
+
+
+def _task_reference(task: Task, controller: Controller) -> str:
+    if task.reference_is_input:
+        slices = [r for r in controller.ref_layout if r.task == task.name]
+        first, last = slices[0].offset, slices[-1].offset + slices[-1].size - 1
+        extra = ", with velocity and acceleration feed-forward" if task.feedforward else ""
+        return f"run time, ref[{first}..{last}]{extra}"
+    constant = task.constant_reference()
+    if not constant:
+        return "none (kp = 0: a pure damping task)"
+    parts = []
+    for key, values in constant.items():
+        if key == "q":
+            parts.append(f"q = {fmt_list(values)} {unit_text(task.row_units)}")
+        elif key == "rpy":
+            parts.append(f"rpy = {fmt_list(values)} rad (world)")
+        else:
+            parts.append(f"position = {fmt_list(values)} m (world)")
+    return "compiled, " + ", ".join(parts)
+
+
+def gains_text(controller: Controller) -> str:
+    """Each task's compiled gains, saturation and reference."""
+    tasks = _tasks(controller)
+    lines = []
+    for spec_task in controller.spec.tasks:
+        task = tasks[spec_task.name]
+        saturation, units = "none", unit_text(task.row_units, "/s")
+        if task.max_velocity is not None and "," in units:
+            saturation = f"{number(task.max_velocity)} (the norm of (kp/kd) dx over axes in {units.replace(', ', ' and ')})"
+        elif task.max_velocity is not None:
+            saturation = f"{number(task.max_velocity)} {units} (the norm of (kp/kd) dx)"
+        lines += [
+            f" *   {task.name}: priority {task.priority}, {_task_subject(task, spec_task.type)}",
+            f" *     kp = {_values(task.kp)} 1/s², kd = {_values(task.kd)} 1/s, max_velocity = {saturation}",
+            f" *     reference: {_task_reference(task, controller)}",
+        ]
+    return "\n".join(lines)
+
+
+# -- limits ----------------------------------------------------------------------------------------
+
+_ENFORCEMENT = {
+    "osc": "osc does not keep them: it has no limits, its torque is only clipped to +-tau_max",
+    "projector": "projector keeps the joint ones by saturation in the null space, not the Cartesian ones; "
+                 "its torque is clipped to +-tau_max",
+}
+_QP_ENFORCEMENT = ("rows of the QP: each becomes a bound on the acceleration that lets the joint or frame "
+                   "brake in time at the control period; |tau| <= tau_max is a hard row")
+
+
+def _cell(value: float, unit: str) -> str:
+    return f"{number(value)} {unit}" if np.isfinite(value) else "none"
+
+
+def limits_text(controller: Controller) -> str:
+    """The joint limits table and the Cartesian bounds."""
+    lim, names = controller.robot.limits, controller.robot.joint_names
+    how = _ENFORCEMENT.get(controller.formulation, _QP_ENFORCEMENT)
+    lines = wrap(f"Limits, compiled ({how}; none: no limit):")
+    rows = [["joint", "q min", "q max", "|dq| max", "|ddq| max", "|tau| max"]]
+    for j, (name, unit) in enumerate(zip(names, joint_units(controller))):
+        torque = "N" if unit == "m" else "Nm"
+        rows.append([name, _cell(lim.q_min[j], unit), _cell(lim.q_max[j], unit), _cell(lim.v_max[j], f"{unit}/s"),
+                     _cell(lim.a_max[j], f"{unit}/s²"), _cell(controller.tau_max[j], torque)])
+    lines.append(columns(rows))
+    if not np.all(np.isfinite(lim.a_max)):
+        lines.append(f" *   |ddq| none: the position and velocity bounds assume braking at {number(DEFAULT_BRAKING)} rad/s² (m/s²).")
+    bounds = controller.robot.cartesian_bounds
+    if not bounds:
+        lines.append(" * Cartesian bounds: none.")
+        return "\n".join(lines)
+    lines.append(" * Cartesian bounds (a frame's origin p between planes of unit normal d, world frame; m, m/s, m/s²):")
+    given = controller.spec.limits.cartesian if len(controller.spec.limits.cartesian) == len(bounds) else [None] * len(bounds)
+    for b, spec_bound in zip(bounds, given):
+        axis = f" (world {b.label})" if b.axis is not None else ""
+        speed = f"|d.v| ≤ {number(b.v_max)} m/s" if np.isfinite(b.v_max) else "speed: no limit"
+        lines += [
+            f" *   {b.frame}.{b.label}: frame {b.frame}, d = {fmt_list(b.direction)}{axis}",
+            f" *     {interval_text('d.p', b.c_min, b.c_max, 'm', DIGITS)}; {speed}; braking at {number(b.a_max)} m/s²",
+        ]
+        if spec_bound is not None and spec_bound.expressed_in not in (None, "world"):
+            lines.append(f" *     (the spec gives normal {fmt_list(spec_bound.normal)} in frame {spec_bound.expressed_in}: "
+                         "d and the offsets above are that plane in the world)")
+    return "\n".join(lines)
+
+
+# -- statuses, model, timing -----------------------------------------------------------------------
+
+
+def status_text(name: str, big: str) -> str:
+    rows = [
+        ("0", "OK", "every torque limit and joint/Cartesian bound holds (checked after the solve)"),
+        ("1", "LIMITS_RELAXED", "a joint/Cartesian bound is crossed (those in info->relaxed): the torque"),
+        ("", "", "limits cannot hold it, and it is violated as little as they allow (tasks"),
+        ("", "", "come after); or the state is already beyond its position or velocity limit"),
+        ("", "", "(after a push), and the bound brings it back"),
+        ("-1", "NONFINITE_INPUT", "an input was NaN or infinite"),
+        ("-2", "SOLVER_FAILED", "the QP solver failed (also on non-finite QP data)"),
+        ("-3", "INVALID_OUTPUT", "the solution was not finite or broke a torque limit"),
+        ("-4", "NOT_INITIALIZED", f"{name}_init was not called or failed"),
+        ("-5", "BAD_ARGUMENT", "ws, q, dq or tau is NULL: nothing was written"),
+    ]
+    return table([(f"{code:>2}  {big}_STATUS_{label}" if label else "", text) for code, label, text in rows],
+                 indent=" *  ")
+
+
+def timing_text(name: str, spec_file: str) -> str:
+    return "\n".join([
+        f" * Timing. Not measured by `dcts compile`: `dcts bench {spec_file}` times {name}_step on the",
+        " * host without Python (median, p99 and max over 10,000 closed-loop and 10,000 independent",
+        " * states), with the QP iterations and solves per step, the workspace and .text sizes.",
+    ])
+
+
+def model_texts(model: dict) -> tuple[str, str]:
+    """The header's and the README's note on the robot model (modified or the spec's own)."""
+    if not model["modified"]:
+        text = f"the spec's robot (model SHA-256 {model['sha256']})"
+        return text, text
+    changes = describe_changes(model.get("changes", {}))
+    header = (
+        f"MODIFIED, not the spec's robot: {changes};\n"
+        f" *                model SHA-256 {model['sha256']}\n"
+        f" *                (the spec's robot: {model['spec_model_sha256']}).\n"
+        f" *                Generated for this model (model mismatch); the spec SHA-256 above is unchanged."
+    )
+    readme = (
+        f"**modified**, not the spec's robot: {changes}; model SHA-256 `{model['sha256']}` (the spec's "
+        f"robot: `{model['spec_model_sha256']}`). The controller was generated for this model (model "
+        "mismatch); the spec's SHA-256 is unchanged."
+    )
+    return header, readme
