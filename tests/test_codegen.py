@@ -118,7 +118,8 @@ def test_bundle_is_complete_and_self_describing(built, three_levels_spec):
     assert "#define THREE_LEVELS_VERSION" in header and "#define THREE_LEVELS_WORKSPACE_BYTES" in header
     assert "#define THREE_LEVELS_STATUS_LIMITS_RELAXED 1" in header
     assert "ref[0..2]" in header and "#define THREE_LEVELS_REF_POS_POSITION 0" in header  # the layout
-    assert "malloc" in header  # what init allocates is documented
+    assert "No heap" in header and "`make nomalloc`" in header  # DAQP is set up inside the workspace
+    assert 0 < manifest["daqp_workspace_bytes"] < manifest["workspace_bytes_host"]
     assert compiled.workspace_bytes == manifest["workspace_bytes_host"]
     # the robot model it was generated for: the spec's own
     robot = validate_spec(load_spec(three_levels_spec)).robot
@@ -134,13 +135,28 @@ def test_bundle_is_complete_and_self_describing(built, three_levels_spec):
 
 
 def test_golden_vectors_replay(built):
-    """The C test program replays the golden vectors (exit code 0) and counts heap calls."""
+    """The C test program replays the golden vectors (exit code 0); counting heap calls, there are
+    none, in init or in the steps; linked with a malloc/calloc/realloc/free that abort, it passes."""
     out, _ = built
-    done = subprocess.run(["make", "-s", "check", "heapcheck"], cwd=out, capture_output=True, text=True)
+    done = subprocess.run(["make", "-s", "check", "heapcheck", "nomalloc"], cwd=out, capture_output=True, text=True)
     assert done.returncode == 0, done.stdout + done.stderr
-    assert "PASS" in done.stdout
+    assert done.stdout.count("PASS") == 3
     heap = re.search(r"heap: init (\d+) calls (\d+) bytes; steps (\d+) calls", done.stdout)
-    assert heap and int(heap.group(2)) > 0 and int(heap.group(3)) == 0, "the steps must not allocate"
+    assert heap and heap.groups() == ("0", "0", "0"), "neither init nor the steps may use the heap"
+    assert "heap: none (malloc, calloc, realloc and free abort)" in done.stdout
+
+
+def test_nomalloc_catches_a_heap_call(built, tmp_path):
+    """`make nomalloc` is a real check: a malloc in init aborts the test."""
+    copy = tmp_path / "bundle"
+    shutil.copytree(built[0], copy)  # with its objects (mtimes kept): only the edited source recompiles
+    source = copy / "three_levels.c"
+    text = source.read_text().replace("#include <string.h>", "#include <string.h>\n#include <stdlib.h>", 1)
+    text = text.replace("    memset(ws, 0, sizeof(*ws));\n",
+                        "    memset(ws, 0, sizeof(*ws));\n    { static void *volatile p = 0; p = malloc(8); if (!p) return -1; }\n", 1)
+    source.write_text(text)
+    done = _make(copy, "nomalloc")
+    assert done.returncode != 0 and "FAIL: malloc called" in done.stdout, done.stdout + done.stderr
 
 
 def test_golden_test_fails_on_mismatch(built, tmp_path):

@@ -65,7 +65,7 @@ def build_c_harness(bundle: Path, manifest: dict, work: Path, optimization: list
     daqp = []
     if manifest["nx"]:  # the bundle's own DAQP objects, built with the flags it ships
         flags.append(f"-I{bundle / 'daqp' / 'include'}")
-        daqp = [str(o) for o in sorted((bundle / "build" / "daqp").glob("*.o"))]
+        daqp = [str(o) for o in sorted((bundle / manifest["host"]["build_dir"] / "daqp").glob("*.o"))]
     run([_cc(), *flags, f"-I{bundle}", "-o", str(exe), str(source), str(bundle / f"{name}.c"),
          str(bundle / f"{name}_casadi.c"), *daqp, "-lm"], work, "bench harness build")
     return exe
@@ -209,7 +209,7 @@ def object_sizes(bundle: Path, manifest: dict, work: Path) -> dict:
     name = manifest["name"]
     sizes = {}
     for stem in (name, f"{name}_casadi"):
-        obj = bundle / "build" / f"{stem}.o"
+        obj = bundle / manifest["host"]["build_dir"] / f"{stem}.o"
         if obj.is_file():
             sizes[f"{stem}.o"] = section_size(obj)
     lib = bundle / manifest["library"]
@@ -269,7 +269,8 @@ def bench(spec_file: str | Path, formulation: str | None = None, states: int = 1
         "pinocchio_terms": pin_ref,
         "ratio_c_step_to_pinocchio": c_traj["step"]["median_us"] / pin_ref["median_us"],
         "workspace_bytes": manifest["workspace_bytes_host"],
-        "daqp_init_heap_bytes": host.get("init_heap_bytes"),
+        "daqp_workspace_bytes": manifest.get("daqp_workspace_bytes"),
+        "heap_calls": host.get("init_heap_calls", 0) + host.get("step_heap_calls", 0),
         "text_bytes": sizes,
         "instructions_per_step": instructions,
         "qp_data_instructions": manifest["qp_data_instructions"],
@@ -308,7 +309,8 @@ def format_report(r: dict) -> str:
         f"the {'QP data' if data_share > 0.5 else 'QP solve'} dominates: qp_data is {100 * data_share:.0f}% of the median step",
         f"QP: {c['qp_iterations']['mean']:.1f} DAQP iterations on average, max {c['qp_iterations']['max']}, "
         f"at most {c['qp_solves_max']} solves per step; statuses {c['statuses']}",
-        f"workspace {r['workspace_bytes']} bytes, DAQP init heap {r['daqp_init_heap_bytes']} bytes",
+        f"workspace {r['workspace_bytes']} bytes (DAQP's arrays {r['daqp_workspace_bytes']} of them), "
+        f"heap calls {r['heap_calls']} (init and step; `make nomalloc`)",
         ".text bytes: " + ", ".join(f"{k} {v}" for k, v in r["text_bytes"].items()),
         "instructions per step (callgrind): "
         + (f"{r['instructions_per_step']:.0f} (-O2, baseline x86-64)" if r["instructions_per_step"]

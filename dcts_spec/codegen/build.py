@@ -26,12 +26,12 @@ from ..phases import building_controller, phase
 from ..controller import Controller
 from ..robot.model import Robot
 from ..spec import Spec, load_spec
-from .bundle import DAQP_VERSION, GENERATOR, GOLDEN_COUNT, HEAP_SENTINEL, CodegenError, generate_sources
+from .bundle import DAQP_VERSION, GENERATOR, GOLDEN_COUNT, CodegenError, generate_sources
 from .model import model_record
 
 CACHE_DIR = Path(os.environ.get("DCTS_CACHE", Path.home() / ".cache" / "dcts"))
 # What the golden-vector test prints (templates/test.c.in): its summary line and, built with
-# heap counting, the heap calls of init and of the steps.
+# heap counting (the Cortex-M7 test on qemu), the heap calls of init and of the steps.
 GOLDEN_SUMMARY = "golden vectors"
 HEAP_LINE = re.compile(r"heap: init (\d+) calls (\d+) bytes; steps (\d+) calls")
 
@@ -155,14 +155,16 @@ class BuildReport:
         if self.built:
             host = m.get("host", {})
             out.append(f"  host library   {m['library']} ({host.get('text_bytes', '?')} bytes .text), "
-                       f"workspace {m['workspace_bytes_host']} bytes, DAQP init heap {host.get('init_heap_bytes', '?')} bytes")
+                       f"workspace {m['workspace_bytes_host']} bytes (DAQP's {m['daqp_workspace_bytes']} included), "
+                       f"no heap (`make nomalloc` passed)")
             out.append(f"  golden test    {host.get('test_summary', '')}")
         else:
             out.append("  sources only (--no-build): run `make && make check` in the directory")
         if self.firmware:
             fw = self.firmware
             out.append(f"  cortex-m7      flash {fw['flash_bytes']} bytes (text+data), RAM {fw['ram_bytes']} bytes "
-                       f"(data+bss, workspace {fw['workspace_bytes']} included) + DAQP heap {fw.get('heap_bytes', '?')} bytes")
+                       f"(data+bss, workspace {fw['workspace_bytes']} included), heap calls "
+                       f"{fw.get('heap_calls', '? (no qemu run)')}")
             if "stack_bytes" in fw:
                 out.append(f"                 largest stack frames: {fw['stack_bytes']}")
             if fw.get("qemu"):
@@ -233,27 +235,37 @@ def compiler_identity(cc: str) -> dict:
     return identity
 
 
-def _daqp_objects(directory: Path, cc: str) -> Path:
-    """Where DAQP's objects for this compiler and the bundle's DAQP flags are kept between builds:
-    every bundle compiles the same DAQP sources the same way, ~5 s a bundle on two cores."""
+def build_dirs(directory: Path, variables: dict[str, str]) -> tuple[str, str]:
+    """The bundle's object folders for these make variables, relative to it (host, Cortex-M7):
+    its Makefile keeps objects per compiler and flags (`make print-build`)."""
+    words = make(directory, ["-s", "print-build"], "make print-build", variables).split()
+    if len(words) != 2:
+        raise CodegenError(f"make print-build printed {' '.join(words)!r}, not two folders")
+    return words[0], words[1]
+
+
+def _daqp_objects(directory: Path, build: str) -> Path:
+    """Where DAQP's objects for this configuration (the host build folder's name: a checksum of the
+    compiler and the flags) are kept between builds: every bundle compiles the same DAQP sources
+    the same way, ~5 s a bundle on two cores."""
     flags = next((line for line in (directory / "Makefile").read_text().splitlines()
                   if line.startswith("DAQP_FLAGS")), "")
-    key = hashlib.sha256(json.dumps([DAQP_VERSION, flags, compiler_identity(cc)]).encode()).hexdigest()[:20]
+    key = hashlib.sha256(json.dumps([DAQP_VERSION, flags, Path(build).name]).encode()).hexdigest()[:20]
     return CACHE_DIR / "daqp-objects" / key
 
 
-def _reuse_daqp_objects(directory: Path, cc: str) -> None:
+def _reuse_daqp_objects(directory: Path, build: str) -> None:
     """Put the kept DAQP objects into the bundle's build folder (newer than its sources: make keeps them)."""
-    kept = _daqp_objects(directory, cc)
+    kept = _daqp_objects(directory, build)
     if kept.is_dir() and (directory / "daqp").is_dir():
-        (directory / "build" / "daqp").mkdir(parents=True, exist_ok=True)
+        (directory / build / "daqp").mkdir(parents=True, exist_ok=True)
         for obj in kept.glob("*.o"):
-            shutil.copyfile(obj, directory / "build" / "daqp" / obj.name)
+            shutil.copyfile(obj, directory / build / "daqp" / obj.name)
 
 
-def _keep_daqp_objects(directory: Path, cc: str) -> None:
-    kept = _daqp_objects(directory, cc)
-    built = sorted((directory / "build" / "daqp").glob("*.o"))
+def _keep_daqp_objects(directory: Path, build: str) -> None:
+    kept = _daqp_objects(directory, build)
+    built = sorted((directory / build / "daqp").glob("*.o"))
     if kept.is_dir() or not built:
         return
     kept.parent.mkdir(parents=True, exist_ok=True)
@@ -267,22 +279,26 @@ def _keep_daqp_objects(directory: Path, cc: str) -> None:
 
 
 def build_host(directory: Path, manifest: dict, cc: str | None = None) -> dict:
-    """Build the host library and the test with `make`, run the test and the heap check."""
+    """Build the host library and the test with `make`, run the test, and again linked with a
+    malloc that aborts (`make nomalloc`: neither init nor step may reach the heap)."""
     phase("compiling C and running the golden-vector test")
     variables = {"CC": cc} if cc else {}
     compiler = cc or os.environ.get("CC", "cc")
-    _reuse_daqp_objects(directory, compiler)
+    build, _ = build_dirs(directory, variables)
+    _reuse_daqp_objects(directory, build)
     make(directory, ["all"], "host build", variables)
-    _keep_daqp_objects(directory, compiler)
+    _keep_daqp_objects(directory, build)
     test = make(directory, ["check"], "golden-vector test", variables)
-    heap = HEAP_LINE.search(make(directory, ["heapcheck"], "heap check", variables))
+    make(directory, ["nomalloc"], "golden-vector test with a malloc that aborts", variables)
     lib = directory / manifest["library"]
     return {
         "compiler": compiler,
+        "build_dir": build,
         "test_summary": _golden_summary(test),
-        "init_heap_calls": int(heap.group(1)) if heap else None,
-        "init_heap_bytes": int(heap.group(2)) if heap else None,
-        "step_heap_calls": int(heap.group(3)) if heap else None,
+        # `make nomalloc` passed: no heap call, in init or in the steps
+        "init_heap_calls": 0,
+        "init_heap_bytes": 0,
+        "step_heap_calls": 0,
         "text_bytes": section_size(lib),
         "library_bytes": lib.stat().st_size,
     }
@@ -306,14 +322,14 @@ def build_firmware(directory: Path, manifest: dict, qemu: bool = True) -> dict:
         "data_bytes": data,
         "bss_bytes": bss,
         "workspace_bytes": _arm_symbol_size(directory / "firmware" / f"{name}_fw.elf", "ws"),
-        "stack_bytes": _stack_usage(directory / "build" / "arm", name),
+        "stack_bytes": _stack_usage(directory / build_dirs(directory, variables)[1], name),
     }
     if qemu and shutil.which("qemu-system-arm"):
         output = make(directory, ["qemu-check"], "golden-vector test on qemu (cortex-m7)", variables, timeout=1200)
         summary = _golden_summary(output)
         heap = HEAP_LINE.search(output)
         if heap:
-            result["heap_bytes"] = int(heap.group(2))
+            result["heap_calls"] = int(heap.group(1)) + int(heap.group(3))
             result["step_heap_calls"] = int(heap.group(3))
         result["qemu"] = f"{summary} — PASS" if "PASS" in output else summary
     return result
@@ -356,15 +372,6 @@ def _stack_usage(build: Path, name: str) -> dict[str, int]:
             if len(parts) >= 2 and parts[1].isdigit():
                 frames[parts[0].split(":")[-1]] = int(parts[1])
     return dict(sorted(frames.items(), key=lambda kv: -kv[1])[:4])
-
-
-def _note_heap(header: Path, heap_bytes: int | None) -> None:
-    """Write the measured DAQP heap into the header's memory note."""
-    if heap_bytes is None:
-        return
-    text = header.read_text()
-    measured = f"{heap_bytes} bytes with the host build's DAQP on x86-64 (`make heapcheck`)"
-    header.write_text(text.replace(HEAP_SENTINEL, measured))
 
 
 def compile_bundle(
@@ -417,7 +424,6 @@ def compile_bundle(
         if build:
             manifest["host"] = build_host(tmp, manifest, cc)
             manifest["built"] = True
-            _note_heap(tmp / f"{manifest['name']}.h", manifest["host"].get("init_heap_bytes"))
         if target == "cortex-m7":
             report.firmware = manifest["cortex_m7"] = build_firmware(tmp, manifest, qemu=qemu)
         (tmp / "manifest.json").write_text(json.dumps(manifest, indent=2) + "\n")

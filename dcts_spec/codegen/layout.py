@@ -34,6 +34,42 @@ def casadi_work_lengths(casadi_work: dict) -> dict[str, int]:
     }
 
 
+def daqp_problems(nx: int, na: int, nr: int) -> list[tuple[int, int, int]]:
+    """(n, m, ms) of each DAQP state, in the order of controller.c.in's C_SOLVER_*: the QP and its
+    stages (NX variables, NX simple bounds + NA rows), and with bounds (NR > 0) the relaxation
+    (NX + NR variables and simple bounds, NA + NR rows). None for a closed form (NX = 0)."""
+    if nx == 0:
+        return []
+    qp = (nx, nx + na, nx)
+    return [qp, qp] + ([(nx + nr, nx + na + 2 * nr, nx + nr)] if nr else [])
+
+
+def daqp_array_lengths(n: int, m: int, ms: int) -> tuple[int, int]:
+    """(doubles, ints) that DAQP's setup_daqp allocates for a QP with n variables and m
+    constraints, ms of them simple bounds, with no soft or binary constraint and no hierarchy
+    (daqp/src/api.c: allocate_daqp_workspace(work, n, ns = 0), then allocate_daqp_ldp(work, n, m,
+    ms, alloc_R = 1, alloc_v = 1)). controller.c.in hands out the same arrays from the workspace."""
+    rows = m - ms
+    doubles = (
+        5 * (n + 1)  # lam, lam_star, D, xldl, zldl
+        + (n + 1) * (n + 2) // 2  # L
+        + 2 * n  # u (= x), xold
+        + 3 * m  # scaling, dupper, dlower
+        + n * rows  # M
+        + (rows if m > ms else 0)  # Mu
+        + (n + 1) * n // 2  # Rinv
+        + n  # v
+    )
+    ints = (n + 1) + n + m  # WS, prox_mask, sense
+    return doubles, ints
+
+
+def daqp_storage(nx: int, na: int, nr: int) -> tuple[int, int]:
+    """(doubles, ints) of every DAQP state's arrays together (see daqp_array_lengths)."""
+    lengths = [daqp_array_lengths(*p) for p in daqp_problems(nx, na, nr)]
+    return sum(d for d, _ in lengths), sum(i for _, i in lengths)
+
+
 def info_struct(nq: int, nlevels: int, nx: int, nr: int) -> type[ctypes.Structure]:
     class Info(ctypes.Structure):
         _fields_ = [
@@ -59,6 +95,7 @@ def workspace_fields(nq: int, nref: int, nx: int, na: int, nlevels: int, casadi_
     n = array_lengths(nx, na, nlevels, nref, nr, np_)
     work = casadi_work_lengths(casadi_work)
     nxa, nc, nx2 = n["nx"], n["nc"], n["nx2"]
+    daqp_doubles, daqp_ints = daqp_storage(nx, na, nr)
     return [
         ("magic", "unsigned long", 0, "set by init"),
         ("arg", "const double *", work["arg"], "CasADi work vectors"),
@@ -130,6 +167,8 @@ def workspace_fields(nq: int, nref: int, nx: int, na: int, nlevels: int, casadi_
         ("fallback", "double", nq, ""),
         ("have_last_q", "int", 0, ""),
         ("refactor", "int", 3, "a DAQP state's H or A changed since it factored them"),
+        ("daqp_real", "double", max(daqp_doubles, 1), "DAQP's arrays (factorizations, working sets) of every state: no heap"),
+        ("daqp_int", "int", max(daqp_ints, 1), ""),
     ]
 
 
