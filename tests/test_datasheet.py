@@ -214,3 +214,14 @@ def test_readme_integration_example_compiles(sheet, tmp_path, formulation):
     done = subprocess.run([compiler, "-std=c99", "-Wall", "-Wextra", "-Wpedantic", "-Werror", "-fsyntax-only",
                            f"-I{bundle}", str(source)], capture_output=True, text=True)
     assert done.returncode == 0, done.stderr
+
+
+def test_prismatic_joint_in_m_and_n(tmp_path):
+    """A prismatic joint's row, inputs and references are in m, m/s and N, a revolute one's in rad."""
+    slider_controller(tmp_path)  # writes the URDF and the spec
+    compile_bundle(tmp_path / "slider.yaml", tmp_path / "bundle", build=False)
+    header = (tmp_path / "bundle" / "slider.h").read_text()
+    assert re.search(r"^ \*   shoulder\s+-2 rad\s+2 rad\s+1\.5 rad/s\s+none\s+20 Nm$", header, re.M)
+    assert re.search(r"^ \*   slide\s+0 m\s+0\.4 m\s+0\.25 m/s\s+none\s+50 N$", header, re.M)
+    assert re.search(r"q\[2\]\s+joint positions \(rad, m for a prismatic joint\)", header)
+    assert re.search(r"task posture, velocity \(rad/s: posture\.shoulder; m/s: posture\.slide\)", header)
