@@ -170,6 +170,7 @@ def test_header_reference_layout_has_real_units(sheet):
 def test_header_states_units_signs_and_timing(sheet):
     _, header = sheet
     assert re.search(r"tau\[7\]\s+output: joint torques to apply \(Nm, gravity included\)", header)
+    assert re.search(r"within \|tau\| <= tau_max = \[100, 100, 80, 80, 60, 40, 40\] Nm$", header, re.M)
     assert re.search(r"q\[7\]\s+joint positions \(rad\)", header) and re.search(r"dq\[7\]\s+joint velocities \(rad/s\)", header)
     assert "the torque the environment applies on the joints" in header
     assert "M(q) ddq + nu(q, dq) + g(q) = tau + tau_ext" in header
@@ -225,3 +226,4 @@ def test_prismatic_joint_in_m_and_n(tmp_path):
     assert re.search(r"^ \*   slide\s+0 m\s+0\.4 m\s+0\.25 m/s\s+none\s+50 N$", header, re.M)
     assert re.search(r"q\[2\]\s+joint positions \(rad, m for a prismatic joint\)", header)
     assert re.search(r"task posture, velocity \(rad/s: posture\.shoulder; m/s: posture\.slide\)", header)
+    assert re.search(r"within \|tau\| <= tau_max = \[20, 50\] \(Nm, N for a prismatic joint\)", header)

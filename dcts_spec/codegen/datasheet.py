@@ -58,27 +58,28 @@ def _tasks(controller: Controller) -> dict[str, Task]:
 # -- inputs and conventions ------------------------------------------------------------------------
 
 
-def _joint_unit_text(units: list[str], suffix: str = "") -> str:
+def _per_joint(units: list[str], revolute: str, prismatic: str) -> str:
+    """One unit for the robot's joints: the revolute or the prismatic one, or both for a mix."""
     if "m" not in units:
-        return "rad" + suffix
+        return revolute
     if "rad" not in units:
-        return "m" + suffix
-    return f"rad{suffix}, m{suffix} for a prismatic joint"
+        return prismatic
+    return f"{revolute}, {prismatic} for a prismatic joint"
 
 
 def parameters_text(controller: Controller, big: str) -> str:
     """The arguments of <name>_step."""
     n, nref = controller.n, controller.ref_size
     units = joint_units(controller)
-    torque = "Nm" if "m" not in units else "Nm, N for a prismatic joint"
+    torque = _per_joint(units, "Nm", "N")
     ignored = " (ignored: external_torque is 'ignored')" if controller.spec.controller.external_torque != "measured" else ""
     return table([
-        (f"q[{n}]", f"joint positions ({_joint_unit_text(units)})"),
-        (f"dq[{n}]", f"joint velocities ({_joint_unit_text(units, '/s')})"),
+        (f"q[{n}]", f"joint positions ({_per_joint(units, 'rad', 'm')})"),
+        (f"dq[{n}]", f"joint velocities ({_per_joint(units, 'rad/s', 'm/s')})"),
         (f"tau_ext[{n}]", f"external joint torques ({torque}), see Conventions; NULL means zero{ignored}"),
         (f"ref[{nref}]", f"run-time references, layout below; may be NULL when {big}_NREF is 0"),
         (f"tau[{n}]", f"output: joint torques to apply ({torque}, gravity included), always finite and"),
-        ("", f"within |tau| <= tau_max = {fmt_list(controller.tau_max)}"),
+        ("", f"within |tau| <= tau_max = {fmt_list(controller.tau_max)} {torque if ',' not in torque else f'({torque})'}"),
         ("info", "optional (may be NULL): commanded acceleration, task scalings, QP solution"),
     ])
 
