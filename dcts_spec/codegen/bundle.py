@@ -31,6 +31,7 @@ from .layout import (C_DATA_OUTPUTS, array_lengths, casadi_work_lengths, daqp_st
 from .datasheet import (conventions_text, fmt_list, gains_text, limits_text, model_texts, parameters_text,
                         ref_layout_text, sizes_text, status_text, timing_text)
 from .model import model_record
+from .spec_copy import copy_spec
 from .states import State, golden_states
 
 GENERATOR = "dcts-spec"
@@ -473,9 +474,7 @@ def generate_sources(
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_text(text, encoding="utf-8")
     (directory / "golden.json").write_text(json.dumps(golden_json(golden), indent=1) + "\n")
-    spec_copy = Path(spec.source.file)
-    if spec_copy.is_file():
-        (directory / "spec.yaml").write_bytes(spec_bytes if spec_bytes is not None else spec_copy.read_bytes())
+    spec_copy = copy_spec(spec, spec_bytes, directory)
 
     statuses = {int(s): int((golden.status == s).sum()) for s in np.unique(golden.status)}
     manifest = {
@@ -515,9 +514,10 @@ def generate_sources(
         "library": f"lib{name}.so",
         "files": sorted([*files, f"{name}_casadi.c", f"{name}_casadi.h", "golden.json", "manifest.json"]
                         + (["daqp/"] if nx else [])
-                        + (["spec.yaml"] if spec_copy.is_file() else [])),
+                        + list(spec_copy.values())),
         "workspace_bytes_host": workspace_bytes,
         "daqp_workspace_bytes": daqp_bytes,
+        "spec_copy": spec_copy,  # spec.yaml (its robot.urdf pointing at the bundle's copy of the URDF)
         "solver_storage_bytes": solver_bytes,
         "built": False,
     }
