@@ -69,7 +69,7 @@ class CompiledController:
         self._info = self._Info()
         self._prepare_buffers()
         if self._init(self._ws) != 0:
-            raise CodegenError(f"{self.name}_init failed (out of memory?)")
+            raise CodegenError(f"{self.name}_init failed: DAQP could not be set up in the workspace (stale build?)")
         self._open = True
 
     def _prepare_buffers(self) -> None:
