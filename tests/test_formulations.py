@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import copy
 import functools
+from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
@@ -61,6 +62,7 @@ FREE_SHARE = 0.45
 # Below this smallest singular value of the top level's Jacobian, locking a joint (saturation in the
 # null space) can leave the projector's top level rank-deficient, and it is damped.
 PROJECTOR_DAMPED = 0.02
+PROJECTOR_FREE_SHARE = 0.4  # FREE_SHARE for the projector's tasks with τ_ext (see test_p5_tasks_track…)
 
 P1_TOL = 1e-8  # top task, relative to max(1, |ẍ_d|, |J a|, |J̇q̇|)
 P2_TOL = 1e-6  # τ and a against the closed form, relative to max(1, |·|)
@@ -443,7 +445,11 @@ def test_p5_tasks_track_with_external_torque(robot, formulation, mode):
         _, _, levels = reference_solution(c.robot.model, tasks, st, measured=False)
         for (J, bias, target), res in zip(levels, level_residuals(levels, acceleration)):
             worst = max(worst, np.abs(res).max() / max(1.0, np.abs(target).max(), np.abs(J @ acceleration).max()))
-    assert used >= FREE_SHARE * len(states), used
+    # SNS checks each level's acceleration, before the levels below, against the bounds (Flacco's
+    # multi-task algorithm): a joint the lower level would bring back within them is saturated
+    # already, so more states have a bound active (iiwa14, measured: 14 of 25)
+    share = PROJECTOR_FREE_SHARE if formulation == "projector" else FREE_SHARE
+    assert used >= share * len(states), used
     assert worst < 1e-6, worst
 
 
@@ -544,4 +550,28 @@ def test_infeasible_limits_are_relaxed(robot, formulation):
     r = c.step(q0, dq, np.zeros(7))
     assert np.all(np.isfinite(r.tau)) and _in_limits(c, r.tau)
     assert r.status == STATUS_LIMITS_RELAXED, r.status
+
+
+def test_projector_scales_the_task_within_the_joint_box():
+    """SNS's task scaling: the octagon's first segment asks ~34 m/s² of the tool from rest, beyond
+    joint accelerations of ±20 rad/s²; the projector scales ẍ_d (not −J̇q̇), keeps every joint in
+    its box and the task's direction (J a + J̇q̇ = s ẍ_d, 0 < s < 1)."""
+    text = (Path(__file__).resolve().parents[1] / "specs" / "paper" / "exp3_octagon.yaml").read_text(encoding="utf-8").replace(
+        "  joint_torque: {max: 100}\n", "  joint_torque: {max: 100}\n  joint_acceleration: {max: 20}\n")
+    text = text.replace("max_velocity: 0.4", "max_velocity: 0.85")
+    key = ("text", text)
+    c = controller(key, "projector")
+    q = np.array([-0.78, 2.05, 2.07, -1.65, -2.08, 2.03, 0.0])
+    model = c.robot.model
+    data = model.createData()
+    pin.framesForwardKinematics(model, data, q)
+    tool = data.oMf[model.getFrameId("tool")].translation
+    st = State(q, np.zeros(7), np.zeros(7))
+    r, a = run(c, st, ref=tool + np.array([0.0, 0.3, 0.0]))
+    (J, bias, _), = reference_solution(model, tasks_of(key, c), st)[2]
+    target = 40.0 * 0.85 * np.array([0.0, 1.0, 0.0])  # from rest: kv v_sat toward the point
+    s = float(r.scaling[0])
+    assert 0.05 < s < 0.9, s
+    assert np.abs(a).max() <= 20.0 + 1e-6
+    assert np.allclose(J @ a + bias, s * target, atol=1e-6 * 34.0)
 
