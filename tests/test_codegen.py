@@ -707,6 +707,16 @@ def test_cortex_m7_firmware_and_qemu(three_levels_spec, tmp_path):
         assert fw["qemu"].endswith("PASS") and fw["heap_calls"] == 0  # none in init or the steps
 
 
+def test_bench_harness_wires_every_qp_data_output():
+    """The bench harness gives qp_data an array for each output (an unset one was a stray pointer)."""
+    from dcts_spec.codegen.bundle import template
+    from dcts_spec.codegen.layout import C_DATA_OUTPUTS
+
+    harness = template("bench.c.in")
+    assert all(f"res[{i}] = " in harness for i in range(len(C_DATA_OUTPUTS)))
+    assert f"res[{len(C_DATA_OUTPUTS)}] = " not in harness
+
+
 @EXTENDED
 def test_bench_runs(tmp_path):
     from dcts_spec.codegen.bench import bench, format_report
