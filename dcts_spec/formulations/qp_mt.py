@@ -1,4 +1,5 @@
-"""QP-MT: eq. (3) regularized by the torque norm r = ‖τ‖² (minimum torque)."""
+"""QP-MT: eq. (3) regularized by the torque norm r = ‖τ‖² (minimum torque), or by ‖τ − g‖² with
+`controller.minimized_torque: without_gravity`."""
 
 from __future__ import annotations
 
@@ -10,7 +11,11 @@ from .weighted import weighted_qp
 
 
 def qp_mt(problem: ControlProblem) -> ControlLaw:
-    # τ = M a + c with c = ν + g − τ_ext:  ‖τ‖² = aᵀMᵀM a + 2cᵀM a + const
+    # τ = M a + c with c = ν + g − τ_ext:  ‖τ‖² = aᵀMᵀM a + 2cᵀM a + const; without gravity, c
+    # drops g (the torque an OSC computes before adding g), so the null space no longer lets the
+    # arm fall to save the gravity torque
     M = problem.mass_matrix
-    c = problem.coriolis + problem.gravity - problem.external_torque
+    c = problem.coriolis - problem.external_torque
+    if problem.spec.controller.minimized_torque == "full":
+        c = c + problem.gravity
     return weighted_qp(problem, 2.0 * ca.mtimes(M.T, M), 2.0 * ca.mtimes(M.T, c))

@@ -43,6 +43,12 @@ class ControllerSpec(StrictModel):
         "velocity decays at the rate min(D/M_jj(q), 0.5/period), stable at the control period whatever the joint's inertia",
         examples=[10.0, [20, 20, 10, 10, 5, 5, 2]],
     )
+    minimized_torque: Literal["full", "without_gravity"] = Field(
+        "full",
+        description="QP-MT only: the torque whose norm r = ‖·‖² is minimized: full (τ, gravity included, the "
+        "paper's eq. (3) as written) or without_gravity (τ − g, as its OSC of eq. (1) computes the torque "
+        "before adding g); the paper does not say which it ran",
+        examples=["full", "without_gravity"])
     regularization_weight: Annotated[Number, Range(0, 1e6, open=True)] = Field(
         1e-4, description="weight w of QP-MT/QP-MD's regularization term, relative to the lowest level's, unitless",
         examples=[1e-4])
