@@ -1,10 +1,10 @@
 """The paper's claims, checked by numbers on shortened versions of its experiments.
 
 The experiments, their analysis and the claim criteria are those of scripts/reproduce_paper.py
-(`--short`), run here with the Python runtime (no C compiler needed; ~20 s in all). The full runs
-and the discussion of every number are in docs/paper_reproduction.md. Only claims that hold in
-our simulation are asserted; the doc explains those that do not (QP-MD "up and backwards", QP-MD
-spending more than QP-MT).
+(`--short`), run here with the Python runtime (no C compiler needed; ~45 s in all). The full runs
+and the discussion of every number are in docs/paper_reproduction.md. The claims are asserted as
+the full run judges them (docs/paper_reproduction/results.json), where the short run reaches the
+same verdict; the doc explains those that do not hold.
 """
 
 from __future__ import annotations
@@ -16,6 +16,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
+
+from dcts_spec.analysis import paper_metrics as pm
 
 ROOT = Path(__file__).resolve().parents[1]
 SPECS = ROOT / "specs" / "paper"
@@ -88,7 +90,7 @@ def test_specs_keep_the_paper_parameters():
     assert len(push) == 1 and push[0]["force"] == [10, 0, 0] and push[0]["duration"] == 0.4
     exp3 = _spec("exp3_octagon.yaml")
     gains = exp3["tasks"][0]["gains"]
-    assert (gains["kp"], gains["kd"], gains["max_velocity"]) == (400, 40, 0.4)
+    assert (gains["kp"], gains["kd"], gains["max_velocity"]) == (400, 40, 0.85)  # the text's speed
     waypoints = exp3["scenario"]["waypoints"]
     assert waypoints["tolerance"] == 0.001
     points = np.array(waypoints["points"])
@@ -113,11 +115,21 @@ def test_exp4_spec_files_differ_only_in_external_torque():
 
 # -- the claims ------------------------------------------------------------------------------------------
 
+def _verdicts(result: dict) -> dict[str, bool]:
+    return {c["id"]: c["holds"] for c in result["claims"]}
+
+
 def test_exp1_null_space_energy(in_tmp):
-    """OSC's null-space kinetic energy stays ≈ 0, QP-MT's grows, QP-MD damps it at a higher energy."""
+    """OSC's null-space kinetic energy stays ≈ 0, QP-MD damps it at a higher energy; of QP-MT's two
+    readings, the full torque ‖τ‖² makes its null space grow but spends more than QP-MD, ‖τ − g‖²
+    spends less than QP-MD but its null space barely moves: neither reproduces every claim."""
     result = _analysis("exp1")
-    _assert_claims(result, ["exp1.osc_null_space_zero", "exp1.qp_mt_null_space_grows",
-                            "exp1.qp_md_damps_at_higher_energy"])
+    _assert_claims(result, ["exp1.osc_null_space_zero", "exp1.qp_md_damps_at_higher_energy",
+                            "exp1.qp_mt_null_space_grows", "exp1.same_task_energy",
+                            "exp1.same_task_energy_without_gravity", "exp1.qp_md_energy_above_qp_mt_without_gravity"])
+    verdicts = _verdicts(result)
+    assert not verdicts["exp1.qp_md_energy_above_qp_mt"]
+    assert not verdicts["exp1.qp_mt_without_gravity_null_space_grows"]
 
 
 def test_exp2_push(in_tmp):
@@ -129,21 +141,31 @@ def test_exp2_push(in_tmp):
     assert m["dcts"]["angle_held_push_end_deg"] == pytest.approx(m["osc"]["angle_held_push_end_deg"], abs=0.5)
 
 
-def test_exp3_octagon(in_tmp):
-    """DCTS keeps every limit on the paper's octagon (v_sat = 0.4 m/s, first points)."""
-    result = _analysis("exp3")
-    _assert_claims(result, ["exp3.dcts_keeps_limits"])
-    assert result["metrics"]["dcts"]["waypoints_reached"] == result["metrics"]["dcts"]["waypoints_total"]
-
-
 def test_exp3_octagon_at_the_stated_speed(in_tmp):
-    """At 0.85 m/s the torque limits bind: DCTS scales only then and keeps every limit, the baseline
-    violates the velocity limits where its torques saturate, and Table II's order holds."""
-    result = _analysis("exp3_vsat_0.85")
-    prefix = "exp3_vsat_0.85:"
-    _assert_claims(result, [prefix + c for c in ("exp3.dcts_keeps_limits", "exp3.dcts_scales_only_at_torque_limits",
-                                                 "exp3.projector_violates_velocity", "exp3.table2")])
-    assert result["metrics"]["dcts"]["scaled_samples"] > 0  # the scaling claim is exercised
+    """At 0.85 m/s (first three points) the torque limits bind: DCTS scales only then and keeps every
+    limit, the baseline (with its 20 rad/s² acceleration limit) follows the path, and Table II's
+    order holds, its position errors of the paper's magnitude, its acceleration errors not."""
+    runs = [r for r in rp.study("exp3")["runs"] if r.label != "dcts_a20"]  # its verdict is a full run's
+    result = rp.analyze_exp3(rp.run_experiment("exp3", RUNTIME, short=True, runs=runs))
+    _assert_claims(result, ["exp3.dcts_keeps_limits", "exp3.dcts_scales_only_at_torque_limits",
+                            "exp3.projector_follows_path", "exp3.table2", "exp3.table2_position_magnitude"])
+    assert not _verdicts(result)["exp3.table2_acceleration_magnitude"]
+    m = result["metrics"]
+    assert m["dcts"]["scaled_samples"] > 0  # the scaling claim is exercised
+    assert m["projector"]["max_joint_velocity_violation_ratio"] > 0.01  # the baseline still breaks a velocity limit
+    # the primary reading lands on the paper's magnitude, the distance to the segment does not
+    assert m["dcts"]["position_error"] > 50 * m["dcts"]["path_error"]
+
+
+def test_exp3_baseline_needs_its_acceleration_limit(in_tmp):
+    """With Table I's limits only, the baseline's clipped torques blow up a velocity limit at the first
+    vertex; with 40 rad/s² both get back to the centre, DCTS keeping every limit."""
+    result = _analysis("exp3_acceleration_limit")
+    m = result["metrics"]
+    assert m["projector_table_i"]["max_joint_velocity_violation_ratio"] > 10
+    assert m["projector_a40"]["waypoints_reached"] == m["projector_a40"]["waypoints_total"]
+    assert m["dcts_a40"]["max_joint_velocity_violation_ratio"] <= 1e-3
+    _assert_claims(result, ["exp3_acceleration_limit:exp3.table2_same_limits_a40"])
 
 
 def test_exp4_hand_guiding(in_tmp):
@@ -154,15 +176,44 @@ def test_exp4_hand_guiding(in_tmp):
 
 
 def test_exp5_payload(in_tmp):
-    """With the payload DCTS and OSC fall alike holding the orientation; QP-MD falls less and spends more."""
+    """Over the whole second, each claim judged over every window [0, t]: DCTS and OSC fall alike
+    holding the orientation until OSC, which knows no limits, outruns DCTS braking at its limits
+    (~0.35-0.4 s); QP-MD never moves up and backwards; it spends more acceleration energy except
+    while DCTS and OSC brake and accelerate (~0.35-0.7 s)."""
     result = _analysis("exp5")
-    _assert_claims(result, ["exp5.falls_holding_orientation", "exp5.dcts_like_osc", "exp5.qp_md_falls_differently",
-                            "exp5.qp_md_more_acceleration_energy"])
+    by_id = {c["id"]: c for c in result["claims"]}
+    assert _verdicts(result) | {"exp5.qp_md_falls_differently": None} == {
+        "exp5.falls_holding_orientation": False, "exp5.dcts_like_osc": False, "exp5.qp_md_up_and_backwards": False,
+        "exp5.qp_md_falls_differently": None,  # 75 % of DCTS's drop after 1 s: the criterion's edge
+        "exp5.qp_md_more_acceleration_energy": True}
+    falls = by_id["exp5.falls_holding_orientation"]["holds_over_windows_ending"]
+    assert len(falls) == 1 and 0.1 < falls[0][0] < 0.2 and 0.25 < falls[0][1] < 0.5  # holds at 0.3 s
+    assert 0.3 < by_id["exp5.dcts_like_osc"]["stops_holding_after_s"] < 0.6
+    assert by_id["exp5.qp_md_up_and_backwards"]["holds_over_windows_ending"] == []
+    energy = by_id["exp5.qp_md_more_acceleration_energy"]["holds_over_windows_ending"]
+    assert len(energy) == 2 and energy[0][1] < 0.5 and energy[1][1] == pytest.approx(1.0)
 
 
-def test_table2_counterpart_definitions():
-    """The path error is the distance to the segment being followed, not to the target."""
+def test_table2_definitions():
+    """The reference point leaves the previous point when the target switches and waits at the target;
+    the path error is the distance to the segment."""
+    t = np.arange(6) * 0.1
+    target = np.array([[1.0, 0, 0]] * 3 + [[1.0, 1.0, 0]] * 3)
+    ref = pm.moving_reference(target, np.zeros(3), t, v_sat=4.0)
+    assert ref[:, 0] == pytest.approx([0, 0.4, 0.8, 1, 1, 1])
+    assert ref[:, 1] == pytest.approx([0, 0, 0, 0, 0.4, 0.8])
     a = np.array([[0.0, 0.0, 0.0]] * 3)
     b = np.array([[1.0, 0.0, 0.0]] * 3)
     p = np.array([[0.5, 0.2, 0.0], [-1.0, 0.0, 0.0], [2.0, 0.0, 0.1]])
-    assert rp._segment_distance(p, a, b) == pytest.approx([0.2, 1.0, np.hypot(1.0, 0.1)])
+    assert pm.segment_distance(p, a, b) == pytest.approx([0.2, 1.0, np.hypot(1.0, 0.1)])
+
+
+def test_table2_acceleration_error_definition():
+    """The saturated law's desired acceleration, and the central difference of the velocity."""
+    law = pm.SaturatedLaw(kp=400, kv=40, v_sat=0.85)
+    x, xd = np.zeros((1, 3)), np.array([[0.5, 0.0, 0.0]])
+    # ẋ_d = 10 Δx = (3, 0, 0) m/s, saturated to 0.85 m/s
+    assert pm.desired_acceleration(x, xd, np.array([[0.3, 0, 0]]), law)[0] == pytest.approx([-40 * (0.5 - 0.85), 0, 0])
+    velocity = np.array([[0.0, 0, 0], [1.0, 0, 0], [4.0, 0, 0]])  # ẍ_1 = (4 − 0)/(2T) = 20 m/s²
+    central, backward = pm.differentiated_acceleration_errors(velocity, np.zeros((3, 3)), 0.1)
+    assert central == pytest.approx([20.0]) and backward == pytest.approx([10.0, 30.0])
