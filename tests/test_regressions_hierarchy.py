@@ -11,6 +11,7 @@
 5. The issue's 300 N push on the bench spec in MuJoCo: the status is never "ok" while a joint is
    beyond a limit, and every joint is back within its limits soon after the push.
 6. At an active position limit the torque settles (no step-to-step chatter).
+7. An arm stretched to its kinematic singularity toward an unreachable run-time target.
 
 Every check of an acceleration is made with Pinocchio's forward dynamics (ABA) applied to the
 returned torque, not with the controller's own `ddq`.
@@ -427,3 +428,25 @@ def test_torque_settles_at_an_active_position_limit():
     assert np.all(log.q[:, 1] <= limit + 1e-5)
     swing = log.tau[settled].max(axis=0) - log.tau[settled].min(axis=0)
     assert swing.max() <= 1.0, f"torque peak to peak over the last 0.5 s: {np.round(swing, 3)} Nm"
+
+
+# -- 7. at a kinematic singularity ------------------------------------------------------------------
+
+def test_stretched_arm_toward_an_unreachable_target_is_solved():
+    """A state of the 10⁶-state closed-loop campaign of the bench spec with `reference: {input:
+    true}` and `external_torque: measured`: the elbow straight (q4 ≈ 1.7e-7), three joints at
+    their velocity limits, the target 1.1 m away. The position level's J M⁻¹ Jᵀ had a pivot ratio
+    of 1.2e-8, just above where damping began (1e-8): its inverse asked ~1e8 rad/s², and DAQP
+    called every stage, the relaxation too, infeasible (31 fallbacks in 10⁶ states)."""
+    text = BENCH.read_text().replace("reference: {position: [0.55, -0.05, 0.22]}", "reference: {input: true}")
+    text = text.replace("  period: 0.001", "  period: 0.001\n  external_torque: measured")
+    c = dcts_spec.build_controller(load_spec_text(text))
+    q = np.array([-2.4529264527396784, -1.1835585733450358, 1.45438140276978, 1.712094174988947e-07,
+                  -0.4367276906320488, 0.0013806856620644317, 1.296088325202181])
+    dq = np.array([-0.1504677480620344, -0.009514374796870142, -1.7453292519943178, -0.24660751955647003,
+                   -2.2689280275926285, -0.1601073585787694, -3.141592653589793])
+    r = c.step(q, dq, np.zeros(7), np.array([0.6878143389084049, 0.5622144982635672, 0.7299267352839208]))
+    assert r.status == 0, (r.status, r.relaxed)
+    a = _accel(c, q, dq, r.tau)
+    lo, hi = joint_acceleration_bounds(c.robot, q, dq, DT)
+    assert np.all(a >= lo - 1e-6 * np.maximum(1, np.abs(lo))) and np.all(a <= hi + 1e-6 * np.maximum(1, np.abs(hi)))
