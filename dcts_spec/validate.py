@@ -16,6 +16,7 @@ from .spec.errors import did_you_mean
 from .spec.tasks import TaskSpec
 from .spec.types import size_of
 from .spec.units import to_si
+from .validate_parameters import check_parameters
 from .tasks import CartesianTask, JointTask, make_task, task_dimension, task_joints
 
 RANK_TOLERANCE = 1e-6
@@ -124,6 +125,7 @@ def validate_spec(spec: Spec) -> ValidationReport:
     diags += _check_tasks(spec, robot)
     diags += _check_controller(spec, robot)
     diags += _check_scenario(spec, robot)
+    diags += check_parameters(spec, robot)
     if any(d.severity == "error" for d in diags):
         raise SpecError(diags)
     q0 = initial_configuration(spec, robot)

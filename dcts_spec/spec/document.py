@@ -9,6 +9,7 @@ from pydantic import BeforeValidator, ConfigDict, Field, PrivateAttr
 
 from .controller import ControllerSpec
 from .limits import LimitsSpec
+from .parameters import ParametersSpec
 from .robot import RobotSpec
 from .scenario import ScenarioSpec
 from .source import SourceMap
@@ -56,6 +57,9 @@ class Spec(StrictModel):
                                        examples=[{"formulation": "dcts", "period": 0.001}])
     tasks: list[TaskSpec] = Field(min_length=1, description="what the robot should do, by priority (at least one task)",
                                   examples=[[{"name": "damping", "type": "joint", "priority": 1, "gains": {"kp": 0, "kd": 5}}]])
+    parameters: ParametersSpec | None = Field(
+        None, description="values the compiled controller lets the firmware change at run time (gains, references, "
+        "limits narrowing only, task activation), ramped without a bump", examples=[{"tasks": {"tool_position": ["kp", "kd"]}}])
     scenario: ScenarioSpec | None = Field(None, description="what `dcts simulate` runs; not needed to compile",
                                           examples=[{"duration": 2.0}])
 
