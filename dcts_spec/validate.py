@@ -16,6 +16,7 @@ from .spec.errors import did_you_mean
 from .spec.tasks import TaskSpec
 from .spec.types import size_of
 from .spec.units import to_si
+from .validate_collision import CollisionReport, check_collision
 from .validate_parameters import check_parameters
 from .tasks import CartesianTask, JointTask, make_task, task_dimension, task_joints
 
@@ -47,6 +48,7 @@ class ValidationReport:
     levels: list[LevelReport]
     gravity_torque: np.ndarray  # g(q0)
     diagnostics: list[Diagnostic] = field(default_factory=list)
+    collision: CollisionReport | None = None  # with a limits.collision section
 
     @property
     def file(self) -> str:
@@ -82,6 +84,7 @@ class ValidationReport:
                                "max": b.c_max if np.isfinite(b.c_max) else None} for b in self.robot.cartesian_bounds],
             },
             "gravity_torque_ratio": self.gravity_torque_ratio,
+            **({"collision": self.collision.to_dict()} if self.collision else {}),
             "diagnostics": [d.to_dict() for d in self.diagnostics],
         }
 
@@ -109,6 +112,8 @@ class ValidationReport:
         for b in robot.cartesian_bounds:
             lines.append(f"              {bound_text(b)}"
                          + ("" if b.axis is not None else f" (world normal {fmt(np.array(b.direction))})"))
+        if self.collision:
+            lines.append(self.collision.summary())
         lines.append(f"  gravity     needs {self.gravity_torque_ratio * 100:.0f}% of the torque limit at the initial configuration")
         lines.extend(f"  {d}" for d in self.diagnostics)
         return "\n".join(lines)
@@ -130,6 +135,8 @@ def validate_spec(spec: Spec) -> ValidationReport:
         raise SpecError(diags)
     q0 = initial_configuration(spec, robot)
     diags += _check_cartesian_bounds(spec, robot, q0)
+    collision, collision_diags = check_collision(spec, robot, q0)
+    diags += collision_diags
     if any(d.severity == "error" for d in diags):
         raise SpecError(diags)
     levels, level_diags = _levels(spec, robot, q0)
@@ -146,7 +153,7 @@ def validate_spec(spec: Spec) -> ValidationReport:
                 "warning",
             )
         )
-    return ValidationReport(spec, robot, q0, levels, gravity, diags)
+    return ValidationReport(spec, robot, q0, levels, gravity, diags, collision)
 
 
 def _check_cartesian_bounds(spec: Spec, robot: Robot, q0: np.ndarray) -> list[Diagnostic]:

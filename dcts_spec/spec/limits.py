@@ -6,6 +6,7 @@ from typing import Annotated, Literal
 
 from pydantic import Field, model_validator
 
+from .collision import CollisionSpec
 from .types import JOINT_VALUE, LENGTH, FieldError, Number, Range, ScalarOrVector, StrictModel
 from .units import AngleUnit, AngularAccelerationUnit, AngularVelocityUnit
 
@@ -109,3 +110,6 @@ class LimitsSpec(StrictModel):
     cartesian: list[CartesianLimit] = Field(
         default_factory=list, description="bounds on frame origins (planes the frames stay between)",
         examples=[[{"frame": "tool", "axis": "z", "min": 0.1}]])
+    collision: CollisionSpec | None = Field(
+        None, description="links kept apart from each other and from obstacles (hard distance bounds); default: none",
+        examples=[{"obstacles": {"table": {"type": "plane", "normal": [0, 0, 1], "point": [0, 0, 0.1]}}}])
