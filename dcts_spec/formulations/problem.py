@@ -9,7 +9,9 @@ import numpy as np
 
 from ..limits.base import AccelerationRows
 from ..limits.cartesian import cartesian_rows
+from ..limits.collision import collision_rows
 from ..limits.joint import joint_rows
+from ..robot.collision import resolve_collision
 from ..robot.model import Robot
 from ..spec import Spec
 from ..spec.types import as_list
@@ -60,7 +62,7 @@ class ControlProblem:
     gravity: ca.SX  # g
     external_torque: ca.SX  # τ_ext as used by the controller (0 when ignored)
     levels: list[Level]
-    acceleration_rows: AccelerationRows  # joint and Cartesian bounds on a
+    acceleration_rows: AccelerationRows  # joint, Cartesian and collision bounds on a
     torque_max: np.ndarray  # |τ| ≤ τ_max (full torque, gravity included)
     period: float
 
@@ -137,6 +139,7 @@ def build_problem(spec: Spec, robot: Robot) -> ControlProblem:
         [
             joint_rows(robot.limits, sym.q, sym.dq, period, robot.joint_names),
             cartesian_rows(robot.cartesian_bounds, sym, period),
+            collision_rows(resolve_collision(spec, robot)[0], sym, period),
         ],
         n,
     )
