@@ -25,6 +25,10 @@ Definitions (N samples t_k = k T; violations are 0 when a limit holds or does no
 - max_external_torque_estimate_error = max_{k,j} |τ̂_ext,j,k+1 − (τ_dist + τ_payload)_j,k|: how far
   the controller's τ_ext input was from that (one step late: a motion-based estimate needs the step's
   acceleration); the model mismatch, sensor noise and bias, or all of it with `ignored` sensing
+- min_distances[pair] = min_k d_pair,k, the signed distance of each watched collision pair (m);
+  collision_violations[pair]: for each pair closer than its minimum d_min at some sample, by how
+  much at worst (max_k d_min − d_k, m), for how many steps, the first and last time;
+  max_collision_violation = the largest of those (0 when every pair kept its minimum)
 - waypoints_reached = points reached (None without waypoints); waypoint_times: when each was, or None
 - realtime_factor = simulated time / wall time of the simulation loop (controller, physics and
   logging; not the viewer, video or progress display)
@@ -40,9 +44,12 @@ from typing import Any
 import numpy as np
 
 from ..controller import STATUS_LIMITS_RELAXED
+from ..limits.collision import distance_function
 from ..limits.naming import row_text
+from ..robot.collision import CollisionModel
 from ..robot.model import Robot
 from ..sim.log import SimulationLog
+from ..symbolic import SymbolicRobot
 from .series import TimeSeries
 from .units import FIXED_UNITS, joints_unit, per, torque_unit
 
@@ -120,6 +127,9 @@ def summary_units(summary: dict[str, Any], series: TimeSeries, robot: Robot) -> 
         "max_disturbance_torque": torque_unit(robot),
         "max_external_torque_estimate_error": torque_unit(robot),
         "relaxed_bounds": {"steps": "steps", "first": "s", "last": "s"},
+        "min_distances": "m",
+        "collision_violations": {"min_distance": "m", "by": "m", "steps": "steps", "first": "s", "last": "s"},
+        "max_collision_violation": "m",
         "min_scaling_at": {"time": "s"},
         "primary_mean_acceleration_error": primary,
         "mean_acceleration_error": levels,
@@ -148,6 +158,33 @@ def _relaxed_bounds(log: SimulationLog, robot: Robot) -> dict[str, dict[str, Any
             out[name] = {"bound": row_text(robot, name), "steps": int(steps.size),
                          "first": float(log.time[steps[0]]), "last": float(log.time[steps[-1]])}
     return out
+
+
+def pair_distances(collision: CollisionModel, robot: Robot, q: np.ndarray) -> np.ndarray:
+    """(N, pairs) signed distance of each watched pair at each sample of q (N, n)."""
+    if not collision.pairs or not len(q):
+        return np.zeros((len(q), len(collision.pairs)))
+    function = distance_function(collision, SymbolicRobot(robot.model))
+    return np.asarray(function.map(len(q))(np.asarray(q).T)).T
+
+
+def collision_metrics(collision: CollisionModel, distances: np.ndarray, time: np.ndarray) -> dict[str, Any]:
+    """min_distances, collision_violations and max_collision_violation (module docstring); none
+    without a collision section."""
+    if not collision.pairs:
+        return {}
+    violations = {}
+    for j, pair in enumerate(collision.pairs):
+        below = pair.min_distance - distances[:, j]
+        steps = np.flatnonzero(below > 0)
+        if steps.size:
+            violations[pair.name] = {"min_distance": pair.min_distance, "by": float(below.max()), "steps": int(steps.size),
+                                     "first": float(time[steps[0]]), "last": float(time[steps[-1]])}
+    return {
+        "min_distances": {p.name: _peak(distances[:, j], np.min, default=np.inf) for j, p in enumerate(collision.pairs)},
+        "collision_violations": violations,
+        "max_collision_violation": max((v["by"] for v in violations.values()), default=0.0),
+    }
 
 
 def _excess(values: np.ndarray, bound: np.ndarray) -> np.ndarray:

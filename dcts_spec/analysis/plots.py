@@ -1,4 +1,5 @@
-"""PNG plots of one run: joints with their limits, torques, task errors, scalings, energies, paths."""
+"""PNG plots of one run: joints with their limits, torques, task errors, scalings, energies, paths,
+collision distances."""
 
 from __future__ import annotations
 
@@ -38,6 +39,8 @@ def write_plots(run: RunResult, directory: Path) -> list[Path]:
     }
     if run.series.frame_positions:
         figures["end_effector_path"] = path_figure([run])
+    if run.collision.pairs:
+        figures["collision_distances"] = distance_figure(run)
     paths = []
     for name, figure in figures.items():
         path = directory / f"{name}.png"
@@ -186,6 +189,39 @@ def scaling_figure(run: RunResult) -> Figure:
     ax.set_ylabel("task scaling s [1]")
     ax.set_title(f"task scalings (1 = executed fully) — {run.label}")
     ax.legend(fontsize=8)
+    return figure
+
+
+# The collision plot names this many pairs, the closest; the others are thin grey lines.
+LABELLED_PAIRS = 8
+
+
+def distance_figure(run: RunResult) -> Figure:
+    """Each watched pair's signed distance over time with its minimum (dashed, the forbidden side
+    shaded): the pairs that came closest in colour and named, the others grey."""
+    t, distances = run.log.time, run.distances
+    figure = Figure(figsize=(9, 4.2), layout="constrained")
+    ax = figure.subplots()
+    margins = distances.min(axis=0) - np.array([p.min_distance for p in run.collision.pairs])
+    closest = set(np.argsort(margins)[:LABELLED_PAIRS].tolist())
+    for j, pair in enumerate(run.collision.pairs):
+        if j in closest:
+            ax.plot(t, distances[:, j], lw=1.1, label=f"{pair.a.name}–{pair.b.name}", zorder=3)
+        else:
+            ax.plot(t, distances[:, j], lw=0.5, color="0.75", zorder=2)
+    lowest = min(p.min_distance for p in run.collision.pairs)
+    for d_min in sorted({p.min_distance for p in run.collision.pairs}):
+        ax.axhline(d_min, color=LIMIT_COLOR, lw=0.8, ls="--")
+    top = min(float(np.max(distances)), 2.0 * run.collision.activation_distance)
+    bottom = min(float(np.min(distances)), 0.0) - 0.05 * top
+    ax.axhspan(bottom, lowest, color=LIMIT_COLOR, alpha=0.12, lw=0)
+    ax.set_ylim(bottom, top)
+    relaxed = np.any([relaxed_steps(run, p.name) for p in run.collision.pairs], axis=0)
+    mark_steps(ax, t, relaxed, "a distance bound relaxed")
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel("signed distance [m]")
+    ax.set_title(f"collision pairs: distance and minimum (dashed) — {run.label}")
+    ax.legend(fontsize=7, ncol=2)
     return figure
 
 

@@ -3,17 +3,18 @@
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from ..robot.collision import CollisionModel, resolve_collision
 from ..robot.model import Robot
 from ..sim.log import SimulationLog
 from ..sim.runner import Simulation
 from ..tasks import CartesianTask
-from .metrics import json_ready, summarize, summary_units
+from .metrics import collision_metrics, json_ready, pair_distances, summarize, summary_units
 from .series import TimeSeries, evaluate
 
 
@@ -30,6 +31,8 @@ class RunResult:
     row_names: dict[str, tuple[str, ...]]  # task → names of its error rows
     waypoint_frame: str | None = None
     waypoint_positions: np.ndarray | None = None  # (P, 3) world points of a position waypoint path
+    collision: CollisionModel = field(default_factory=CollisionModel.empty)
+    distances: np.ndarray | None = None  # (N, pairs) signed distance of each watched pair, m
 
     def save_log(self, path: Path) -> None:
         """log.npz: the log's arrays, the derived series, and names to read them by."""
@@ -65,9 +68,12 @@ def analyze(sim: Simulation, log: SimulationLog, label: str | None = None) -> Ru
         "mass_scale": sim.scenario.mass_scale,
         **summarize(log, series, robot, priorities),
     }
+    collision = resolve_collision(spec, robot)[0]
+    distances = pair_distances(collision, robot, log.q)
+    summary |= collision_metrics(collision, distances, log.time)
     summary["units"] = summary_units(summary, series, robot)
     result = RunResult(label or sim.formulation, robot, log, series, summary, priorities,
-                       {t.name: t.row_names for t in sim.tasks})
+                       {t.name: t.row_names for t in sim.tasks}, collision=collision, distances=distances)
     follower = sim.waypoints
     if follower is not None and isinstance(follower.task, CartesianTask):
         fields = [f for f, _, _ in follower.slices]

@@ -16,6 +16,8 @@ import mujoco
 import numpy as np
 import pinocchio as pin
 
+from ..robot.collision import CollisionModel, Shape
+
 # MuJoCo rejects moving bodies whose mass or principal inertia is below mjMINVAL (1e-15),
 # and a `fullinertia` that is not positive definite. Such bodies (massless intermediate
 # links, point masses) get this much mass and isotropic inertia added: safely above
@@ -24,6 +26,9 @@ _INERTIA_EPS = 1e-14
 
 _CAPSULE_RADIUS = 0.03
 _CAPSULE_RGBA = (0.7, 0.7, 0.7, 1.0)
+_LINK_PRIMITIVE_RGBA = (1.0, 0.55, 0.1, 0.35)  # translucent: the link's own geometry shows through
+_OBSTACLE_RGBA = (0.8, 0.2, 0.2, 0.7)
+_PLANE_SIZE = (2.0, 2.0, 0.05)  # drawn half-extent; its collisions are unbounded
 
 _MESH_SUFFIXES = (".stl", ".obj")
 
@@ -67,6 +72,7 @@ def build_mujoco_model(
     payloads: Sequence[Payload] = (),
     geometry: pin.GeometryModel | None = None,
     scenery: bool = False,
+    collision: CollisionModel | None = None,
 ) -> mujoco.MjModel:
     """MuJoCo model of a fixed-base Pinocchio model with revolute and prismatic joints.
 
@@ -83,6 +89,9 @@ def build_mujoco_model(
       consecutive joint origins. Geoms never collide (contype = conaffinity = 0).
     - ``scenery`` adds what a viewer or a video needs and the dynamics ignore: a
       non-colliding checkered floor at z = 0, a light and a sky.
+    - ``collision`` adds the collision primitives of the links and the obstacles as geoms
+      that collide only in the watched pairs (explicit contact pairs): a violation of the
+      controller's distance bounds becomes a contact, as it would be on the robot.
 
     Args:
         model: Fixed-base Pinocchio model.
@@ -91,6 +100,7 @@ def build_mujoco_model(
         payloads: Masses added to the MuJoCo model only.
         geometry: Geometry to display; mesh paths as resolved by Pinocchio's loaders.
         scenery: Add a floor, a light and a sky for rendering.
+        collision: The spec's collision model (limits.collision), resolved.
 
     Raises:
         ValueError: On a joint that is neither revolute nor prismatic, an unknown
@@ -142,6 +152,8 @@ def build_mujoco_model(
         _add_capsules(model, bodies)
     else:
         _add_geometry(spec, geometry, bodies)
+    if collision is not None:
+        _add_collision(spec, model, bodies, collision)
     if scenery:
         _add_scenery(spec)
     mj_model = spec.compile()
@@ -283,6 +295,44 @@ def _add_geometry(spec: mujoco.MjSpec, geometry: pin.GeometryModel, bodies: list
         bodies[obj.parentJoint].add_geom(
             name=obj.name, pos=pos, quat=quat, rgba=obj.meshColor, contype=0, conaffinity=0, **kwargs
         )
+
+
+def _add_collision(spec: mujoco.MjSpec, model: pin.Model, bodies: list[mujoco.MjsBody], collision: CollisionModel) -> None:
+    """The primitives as geoms (named collision_<body>_<k>) and one contact pair per two primitives of a
+    watched pair; the geoms collide with nothing else (contype = conaffinity = 0)."""
+    names: dict[str, list[str]] = {}
+    for body in (*collision.links, *collision.obstacles):
+        if body.frame is None:
+            parent, placement, rgba = spec.worldbody, pin.SE3.Identity(), _OBSTACLE_RGBA
+        else:
+            frame = model.frames[model.getFrameId(body.frame)]
+            parent, placement, rgba = bodies[frame.parentJoint], frame.placement, _LINK_PRIMITIVE_RGBA
+        names[body.name] = []
+        for k, shape in enumerate(body.shapes):
+            name = f"collision_{body.name}_{k}"
+            parent.add_geom(name=name, rgba=rgba, contype=0, conaffinity=0, **_geom(shape, placement))
+            names[body.name].append(name)
+    for pair in collision.pairs:
+        for a in names[pair.a.name]:
+            for b in names[pair.b.name]:
+                spec.add_pair(geomname1=a, geomname2=b)
+
+
+def _geom(shape: Shape, placement: pin.SE3) -> dict[str, object]:
+    """MjSpec geom attributes of a shape given in a frame placed at `placement` in the body."""
+    if shape.swept:
+        start, end = placement.act(shape.start), placement.act(shape.end)
+        if shape.kind == "sphere":
+            return {"type": mujoco.mjtGeom.mjGEOM_SPHERE, "pos": start, "size": [shape.radius, 0.0, 0.0]}
+        return {"type": mujoco.mjtGeom.mjGEOM_CAPSULE, "fromto": np.concatenate([start, end]),
+                "size": [shape.radius, 0.0, 0.0]}
+    if shape.kind == "box":
+        pos, quat = _pos_quat(placement * pin.SE3(shape.rotation, shape.start))
+        return {"type": mujoco.mjtGeom.mjGEOM_BOX, "pos": pos, "quat": quat, "size": shape.half}
+    # a plane's geom is its z axis: rotate z onto the normal
+    rotation = pin.Quaternion.FromTwoVectors(np.array([0.0, 0.0, 1.0]), shape.normal).matrix()
+    pos, quat = _pos_quat(placement * pin.SE3(rotation, shape.start))
+    return {"type": mujoco.mjtGeom.mjGEOM_PLANE, "pos": pos, "quat": quat, "size": list(_PLANE_SIZE)}
 
 
 def _add_scenery(spec: mujoco.MjSpec) -> None:

@@ -12,6 +12,7 @@ import mujoco
 import numpy as np
 
 from ..controller import STATUS_LIMITS_RELAXED
+from ..robot.collision import resolve_collision
 from ..robot.model import Robot
 from ..spec import Spec
 from ..tasks import make_task
@@ -51,7 +52,8 @@ class Simulation:
         self.runtime_kind = runtime_kind
         self.formulation = formulation or spec.controller.formulation
         self.mj_model = build_mujoco_model(robot.model, timestep=scenario.timestep, integrator=scenario.integrator,
-                                           payloads=scenario.payloads, scenery=True)
+                                           payloads=scenario.payloads, scenery=True,
+                                           collision=resolve_collision(spec, robot)[0])
         self.mj_data = mujoco.MjData(self.mj_model)
         self.tasks = [make_task(t, robot) for t in spec.tasks]
         self.initial_ref = initial_references(self.tasks, runtime.ref_layout, robot, scenario.q0)
