@@ -1,11 +1,12 @@
 """The compiled controller: a CasADi function for the QP data, the lexicographic solve, a safe fallback.
 
-    qp_data(q, dq, tau_ext, ref) → H, f, A, lba, uba, lbx, ubx, tau0, T, ddq0, Q, s0, S, p0, P, excess
+    qp_data(q, dq, tau_ext, ref, param) → H, f, A, lba, uba, lbx, ubx, tau0, T, ddq0, Q, s0, S, p0, P, excess
 
 τ = tau0 + T x, q̈ = ddq0 + Q x (commanded: M⁻¹(τ − ν − g)), s = s0 + S x, and p0 + P x the task
 acceleration of an over-constrained lowest level (empty if there is none), where x solves the
 lexicographic QP (`solve/`; empty for closed-form formulations). The generated C code runs the very
-same function and the same DAQP.
+same function and the same DAQP. `param` holds the run-time parameters (`formulations/parameters.py`),
+which `Controller.set_params` changes without a bump (`parameter_ramp.py`).
 """
 
 from __future__ import annotations
@@ -18,7 +19,9 @@ import numpy as np
 
 from .formulations import FORMULATIONS, ControlLaw, ControlProblem, build_problem
 from .formulations.fallback import fallback_torque
+from .formulations.parameters import ParameterLayout
 from .formulations.qp import BOUNDS
+from .parameter_ramp import ParameterRamp, ramp_steps
 from .robot.model import Robot
 from .solve import Structure, check_bounds, solve_lexicographic
 from .spec import Spec, load_spec
@@ -105,12 +108,12 @@ def data_function(problem: ControlProblem, law: ControlLaw, name: str = "qp_data
     excess = problem.acceleration_rows.excess if qp is not None else ca.SX(0, 1)
     outputs = [H, f, A, lba, uba, lbx, ubx, torque.offset, torque_matrix, ddq0, Q, law.scaling.offset, scaling_matrix, p0, P,
                excess]
-    inputs = [problem.q, problem.dq, problem.tau_ext, problem.ref]
+    inputs = [problem.q, problem.dq, problem.tau_ext, problem.ref, problem.param]
     return ca.Function(
         name,
         inputs,
         [ca.densify(o) for o in outputs],
-        ["q", "dq", "tau_ext", "ref"],
+        ["q", "dq", "tau_ext", "ref", "param"],
         list(DATA_OUTPUTS),
         {"cse": True},
     )
@@ -135,8 +138,10 @@ class Controller:
         self.law = FORMULATIONS[self.formulation](self.problem)
         self.data = data_function(self.problem, self.law)
         fallback = fallback_torque(self.problem)
-        self.fallback_function = ca.Function("fallback", [self.problem.q, self.problem.dq], [fallback], ["q", "dq"], ["tau"])
-        self.tau_max = np.asarray(robot.limits.tau_max, dtype=float)
+        p = self.problem
+        self.fallback_function = ca.Function("fallback", [p.q, p.dq, p.param], [fallback], ["q", "dq", "param"], ["tau"])
+        self.tau_max = np.asarray(robot.limits.tau_max, dtype=float)  # as compiled (the envelope)
+        self.reset_params()
         self._last_q: np.ndarray | None = None
         qp = self.law.qp
         self._structure = None if qp is None else Structure(
@@ -171,9 +176,51 @@ class Controller:
         return int(self.problem.ref.shape[0])
 
     @property
+    def param_layout(self) -> ParameterLayout:
+        """The run-time parameters: where each sits in `param`, its default and allowed range."""
+        return self.problem.param_layout
+
+    @property
+    def param_size(self) -> int:
+        return self.param_layout.size
+
+    @property
     def priorities(self) -> list[int]:
         """The priority of each entry of `scaling`."""
         return [lv.priority for lv in self.problem.levels]
+
+    # -- run-time parameters ---------------------------------------------------------------------
+
+    def set_params(self, values: dict | np.ndarray) -> None:
+        """Take a new parameter set, reached over the spec's ramp time (`parameter_ramp.py`).
+
+        `values`: {name: value or values} over the current set (names as in `param_layout`, e.g.
+        "tool_position.kp"; one value sets every component), or a whole vector. The whole set is
+        checked: on a ParameterError (naming the field) the current set is kept."""
+        vector = self.param_layout.vector(values, self._ramp.target)
+        self.param_layout.check(vector)
+        self._ramp.set(vector)
+
+    def params(self) -> dict[str, list[float]]:
+        """The parameter set last taken (the ramp's target), by name."""
+        return self.param_layout.as_dict(self._ramp.target)
+
+    def params_default(self) -> dict[str, list[float]]:
+        """The compiled values, by name."""
+        return self.param_layout.as_dict(self.param_layout.defaults)
+
+    def reset_params(self) -> None:
+        """Back to the compiled values at once (no ramp), as a freshly initialized controller."""
+        layout = self.param_layout
+        self._ramp = ParameterRamp(layout.defaults, ramp_steps(layout.ramp_time, self.problem.period))
+
+    def torque_limit(self, param: np.ndarray) -> np.ndarray:
+        """|τ| ≤ this with the parameter values `param` (the compiled limit where there is none)."""
+        out = self.tau_max.copy()
+        for j, index in enumerate(self.param_layout.torque_index):
+            if index >= 0:
+                out[j] = param[index]
+        return out
 
     # -- running ---------------------------------------------------------------------------------
 
@@ -204,23 +251,29 @@ class Controller:
         P, p0 = data["P"], data["p0"].ravel()
         return least_squares_scaling(P @ x + p0, P @ free + p0)
 
-    def fallback_torque(self, q: np.ndarray, dq: np.ndarray) -> np.ndarray:
+    def fallback_torque(self, q: np.ndarray, dq: np.ndarray, param: np.ndarray | None = None) -> np.ndarray:
         """The stable damping of `formulations/fallback.py` at q (else the last finite q), clipped to
-        the torque limits; non-finite velocities count as 0."""
+        the torque limits; non-finite velocities count as 0. `param`: the parameter values (default:
+        those of the last step)."""
+        param = self._ramp.now if param is None else param
         if np.all(np.isfinite(q)):
             self._last_q = q
         dq = np.where(np.isfinite(dq), dq, 0.0)
         if self._last_q is None:
             return np.zeros(self.n)
-        tau = np.array(self.fallback_function(self._last_q, dq)).ravel()
-        return np.clip(np.where(np.isfinite(tau), tau, 0.0), -self.tau_max, self.tau_max)
+        tau = np.array(self.fallback_function(self._last_q, dq, param)).ravel()
+        limit = self.torque_limit(param)
+        return np.clip(np.where(np.isfinite(tau), tau, 0.0), -limit, limit)
 
-    def evaluate_data(self, q, dq, tau_ext=None, ref=None) -> dict[str, np.ndarray]:
-        """The QP data and output maps at a state (for tests and tools)."""
-        return self._evaluate(*self._inputs(q, dq, tau_ext, ref))
+    def evaluate_data(self, q, dq, tau_ext=None, ref=None, param=None) -> dict[str, np.ndarray]:
+        """The QP data and output maps at a state (for tests and tools); `param` defaults to the
+        values of the last step."""
+        param = self._ramp.now if param is None else np.asarray(param, dtype=float).reshape(-1)
+        return self._evaluate(*self._inputs(q, dq, tau_ext, ref), param)
 
-    def _evaluate(self, q: np.ndarray, dq: np.ndarray, tau_ext: np.ndarray, ref: np.ndarray) -> dict[str, np.ndarray]:
-        return {name: np.array(v) for name, v in zip(DATA_OUTPUTS, self.data(q, dq, tau_ext, ref))}
+    def _evaluate(self, q: np.ndarray, dq: np.ndarray, tau_ext: np.ndarray, ref: np.ndarray,
+                  param: np.ndarray) -> dict[str, np.ndarray]:
+        return {name: np.array(v) for name, v in zip(DATA_OUTPUTS, self.data(q, dq, tau_ext, ref, param))}
 
     def _inputs(self, q, dq, tau_ext, ref) -> tuple[np.ndarray, ...]:
         q = np.asarray(q, dtype=float).reshape(-1)
@@ -240,12 +293,14 @@ class Controller:
         return StepResult(self.fallback_torque(q, dq), np.zeros(self.n), np.zeros(len(self.problem.levels)), status, x)
 
     def step(self, q, dq, tau_ext=None, ref=None) -> StepResult:
-        """One control step: τ, commanded q̈, scalings and a status code."""
+        """One control step: τ, commanded q̈, scalings and a status code. Each step moves a
+        parameter change one period along its ramp (also a step that falls back)."""
         q, dq, tau_ext, ref = self._inputs(q, dq, tau_ext, ref)
+        param = self._ramp.advance()
         if not all(np.all(np.isfinite(v)) for v in (q, dq, tau_ext, ref)):
             return self._fallback(q, dq, STATUS_NONFINITE_INPUT, np.zeros(0))
         self._last_q = q
-        data = self._evaluate(q, dq, tau_ext, ref)
+        data = self._evaluate(q, dq, tau_ext, ref, param)
         x = np.zeros(0)
         if self.nx:
             finite = all(np.all(np.isfinite(data[k])) for k in ("H", "f", "A")) and not any(
@@ -255,8 +310,9 @@ class Controller:
                 return self._fallback(q, dq, STATUS_SOLVER_FAILED, np.zeros(0))
             x = solution
         tau = data["tau0"].ravel() + data["T"] @ x
-        tolerance = TORQUE_TOLERANCE * np.maximum(1.0, np.where(np.isfinite(self.tau_max), self.tau_max, 1.0))
-        out_of_limits = self.law.enforces_torque_limits and np.any(np.abs(tau) > self.tau_max + tolerance)
+        tau_max = self.torque_limit(param)
+        tolerance = TORQUE_TOLERANCE * np.maximum(1.0, np.where(np.isfinite(tau_max), tau_max, 1.0))
+        out_of_limits = self.law.enforces_torque_limits and np.any(np.abs(tau) > tau_max + tolerance)
         if not np.all(np.isfinite(tau)) or out_of_limits:
             return self._fallback(q, dq, STATUS_INVALID_OUTPUT, x)
         status, relaxed = STATUS_OK, []
@@ -269,7 +325,7 @@ class Controller:
         scaling = np.clip(data["s0"].ravel() + data["S"] @ x, 0.0, 1.0)
         if self.law.least_squares_task is not None:
             scaling[-1] = self._least_squares_scaling(data, x)
-        return StepResult(np.clip(tau, -self.tau_max, self.tau_max), ddq, scaling, status, x, relaxed)
+        return StepResult(np.clip(tau, -tau_max, tau_max), ddq, scaling, status, x, relaxed)
 
 
 def build_controller(spec: Spec | str | Path, formulation: str | None = None) -> Controller:

@@ -249,7 +249,7 @@ def test_fallback_torque_decays_speeds_mujoco_1000(robot):
 def _one_period(c, q, dq):
     """q̇ after one period under the held fallback torque (semi-implicit Euler of the exact dynamics),
     and whether the torque was clipped."""
-    raw = np.array(c.fallback_function(q, dq)).ravel()
+    raw = np.array(c.fallback_function(q, dq, c.param_layout.defaults)).ravel()
     tau = c.fallback_torque(q, dq)
     a = _accel(c, q, dq, tau)
     return dq + c.problem.period * a, bool(np.any(np.abs(raw) > c.robot.limits.tau_max))

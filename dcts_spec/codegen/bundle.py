@@ -119,13 +119,13 @@ def qp_data_function(controller: Controller, name: str) -> ca.Function:
     """`Controller.data` re-packed for the wrapper: A row-major (as DAQP wants it) and the simple
     and general bounds stacked as [lbx; lba] and [ubx; uba]. Same inputs, same operations."""
     p = controller.problem
-    inputs = [p.q, p.dq, p.tau_ext, p.ref]
+    inputs = [p.q, p.dq, p.tau_ext, p.ref, p.param]
     out = dict(zip(DATA_OUTPUTS, controller.data(*inputs)))
     outputs = [
         out["H"], out["f"], out["A"].T, ca.vertcat(out["lbx"], out["lba"]), ca.vertcat(out["ubx"], out["uba"]),
         out["tau0"], out["T"], out["ddq0"], out["Q"], out["s0"], out["S"], out["p0"], out["P"], out["excess"],
     ]
-    return ca.Function(f"{name}_qp_data", inputs, outputs, ["q", "dq", "tau_ext", "ref"], list(C_DATA_OUTPUTS),
+    return ca.Function(f"{name}_qp_data", inputs, outputs, ["q", "dq", "tau_ext", "ref", "param"], list(C_DATA_OUTPUTS),
                        {"cse": True})
 
 
@@ -441,6 +441,8 @@ def generate_sources(
         "TORQUE_TOLERANCE": c_double(TORQUE_TOLERANCE),
         "DAQP_SETTINGS": daqp_settings_code(settings),
         "TAU_MAX_ARRAY": c_array(tau_max),
+        "PARAM_DEFAULTS": c_array(controller.param_layout.defaults) if controller.param_size else "0",
+        "NPARAM_ALLOC": max(controller.param_size, 1),
         "DAMPING_ARRAY": c_array(damping),
         "NEEDS_DAQP": int(nx > 0),
         **_golden_tolerances(controller.formulation),

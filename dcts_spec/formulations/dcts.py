@@ -31,7 +31,7 @@ from __future__ import annotations
 import casadi as ca
 
 from ..symbolic.linalg import null_space_basis
-from .hierarchy import least_squares_objective, level_structure, recursive_hierarchy
+from .hierarchy import NULL_SPACE_REGULARIZATION, least_squares_objective, level_structure, recursive_hierarchy
 from .problem import ControlProblem
 from .qp import INF, Affine, ControlLaw, PriorityVariables, with_limits
 
@@ -41,7 +41,11 @@ def dcts(problem: ControlProblem) -> ControlLaw:
     levels = problem.levels
     exact = levels[: structure.exact_levels]
     n, k = problem.n, len(exact)
-    nz = structure.free_dimension
+    # A level with a run-time activation releases its directions as the activation falls: the
+    # freedom left is range(N_k) of the activated recursion, which no fixed basis spans; it is
+    # then N_k z with n variables (their part along null(N_k) held at 0 by a regularization).
+    released = any(lv.activation is not None for lv in exact)
+    nz = n if released else structure.free_dimension
     dims = [lv.dim for lv in exact]
     nx = k + sum(dims) + nz
     variables = [f"s[{lv.priority}]" for lv in exact]
@@ -60,7 +64,7 @@ def dcts(problem: ControlProblem) -> ControlLaw:
         priorities.append(PriorityVariables(lv.priority, i, list(range(start, start + lv.dim))))
         start += lv.dim
 
-    a, _ = recursive_hierarchy(problem, commands, nx)
+    a, N = recursive_hierarchy(problem, commands, nx)
     matrix = a.matrix
     H = ca.SX(nx, nx)
     f = ca.SX(nx, 1)
@@ -71,7 +75,10 @@ def dcts(problem: ControlProblem) -> ControlLaw:
     if nz:
         # The freedom left by the exact levels is null([J₁; …; J_k]) = range(N_k); a basis of it
         # keeps the QP small (N_k z would carry n variables for n − Σmᵢ directions).
-        Z = null_space_basis(ca.vertcat(*[lv.jacobian for lv in exact])) if k else ca.SX.eye(n)
+        if released:
+            Z = N
+        else:
+            Z = null_space_basis(ca.vertcat(*[lv.jacobian for lv in exact])) if k else ca.SX.eye(n)
         matrix[:, z] = Z
         if structure.least_squares_last:
             last = levels[-1]
@@ -81,6 +88,9 @@ def dcts(problem: ControlProblem) -> ControlLaw:
             notes.append(f"priority {last.priority} is over-constrained: solved in least squares")
         else:
             H[z, z] = ca.mtimes([Z.T, problem.mass_matrix, Z])
+        if released:
+            complement = ca.SX.eye(n) - N
+            H[z, z] += NULL_SPACE_REGULARIZATION * ca.mtimes(complement.T, complement)
     acceleration = Affine(a.offset, matrix)
 
     lbx = [0.0] * k + [-INF] * (nx - k)

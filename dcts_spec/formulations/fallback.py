@@ -31,9 +31,10 @@ def fallback_torque(problem: ControlProblem) -> ca.SX:
     rate = ca.fmin(damping / ca.diag(M), STEP_DECAY / problem.period)
     hold, brake = problem.coriolis + problem.gravity, ca.mtimes(M, -rate * problem.dq)
     alpha = ca.SX(1.0)
-    for j, limit in enumerate(problem.torque_max):
-        if not np.isfinite(limit):
+    for j, compiled in enumerate(problem.torque_max):
+        if not np.isfinite(compiled):
             continue
+        limit = problem.torque_limit[j]  # (a run-time torque limit, if there is one)
         room = ca.if_else(brake[j] > 0, limit - hold[j], -limit - hold[j])  # brake[j]·α may use this
         share = ca.if_else(ca.fabs(brake[j]) > 0, room / (brake[j] + (brake[j] == 0)), 1.0)
         alpha = ca.fmin(alpha, ca.fmax(share, 0.0))

@@ -73,18 +73,42 @@ def recursive_hierarchy(
     matrix = ca.SX(n, nx)
     N = ca.SX.eye(n) if projector is None else projector
     for level, v in zip(problem.levels, commands):
-        J = level.jacobian
+        J, bias, command = level.jacobian, level.bias, v
         Jr = ca.mtimes(J, N)
         Minv_JrT = ca.mtimes(Minv, Jr.T)
-        Jbar = ca.mtimes(Minv_JrT, damped_inverse(ca.mtimes(Jr, Minv_JrT)))
-        offset = offset + ca.mtimes(Jbar, v.offset - level.bias - ca.mtimes(J, offset))
-        matrix = matrix + ca.mtimes(Jbar, v.matrix - ca.mtimes(J, matrix))
+        inner = ca.mtimes(Jr, Minv_JrT)
+        if level.activation is not None:
+            J, bias, command, Jr, Minv_JrT, inner = _activated(level.activation, J, bias, command, Jr, Minv_JrT, inner)
+        Jbar = ca.mtimes(Minv_JrT, damped_inverse(inner))
+        offset = offset + ca.mtimes(Jbar, command.offset - bias - ca.mtimes(J, offset))
+        matrix = matrix + ca.mtimes(Jbar, command.matrix - ca.mtimes(J, matrix))
         N = N - ca.mtimes(Jbar, Jr)
     return Affine(offset, matrix), N
 
 
+def _activated(activation: ca.SX, J: ca.SX, bias: ca.SX, command: Affine, Jr: ca.SX, Minv_JrT: ca.SX, inner: ca.SX):
+    """A level whose rows have run-time activations a ∈ [0, 1]: each row is weighted by √a and
+    (1 − a) times the level's mean eigenvalue is added to its diagonal of J M⁻¹ Jᵀ.
+
+    At a = 1 this is the level itself (exact); at a = 0 the row has no effect at all: it neither
+    moves the robot nor takes any direction from the levels below (N is left unchanged), as if the
+    task were not in the spec. In between the row is a damped least-squares task: where its
+    J M⁻¹ Jᵀ is isotropic it gets the fraction a of the acceleration it asks for, and it releases
+    its directions to the levels below gradually, so a ramped activation switches a task on or off
+    without a torque jump. (Scaling the rows alone would change nothing: a strict level meets
+    √a J a = √a v exactly for any a > 0.)
+    """
+    root = ca.sqrt(activation)
+    mean = ca.trace(inner) / inner.shape[0]
+    rows = ca.diag(root)
+    inner = ca.mtimes([rows, inner, rows]) + ca.diag((1.0 - activation) * mean)
+    return (ca.mtimes(rows, J), root * bias, Affine(root * command.offset, ca.mtimes(rows, command.matrix)),
+            ca.mtimes(rows, Jr), ca.mtimes(Minv_JrT, rows), inner)
+
+
 def least_squares_objective(level: Level, acceleration: Affine, mass: ca.SX) -> tuple[ca.SX, ca.SX]:
-    """Hessian and gradient in x of  ½‖J a(x) + J̇q̇ − ẍ_d‖² + ½ε‖a(x) − a(0)‖²_M  (a(x) affine).
+    """Hessian and gradient in x of  ½‖J a(x) + J̇q̇ − ẍ_d‖² + ½ε‖a(x) − a(0)‖²_M  (a(x) affine),
+    each row's square weighted by its run-time activation if it has one.
 
     Over the freedom a(x) leaves, the minimizer is the closed-form step with a pseudo-inverse,
     a + J̄⁺(ẍ_d − J̇q̇ − J a), also where J restricted to that freedom has lost rank: the task is
@@ -93,6 +117,9 @@ def least_squares_objective(level: Level, acceleration: Affine, mass: ca.SX) -> 
     """
     G = ca.mtimes(level.jacobian, acceleration.matrix)
     residual = ca.mtimes(level.jacobian, acceleration.offset) + level.bias - level.target
+    if level.activation is not None:  # each row's square weighted by its activation
+        root = ca.sqrt(level.activation)
+        G, residual = ca.mtimes(ca.diag(root), G), root * residual
     energy = ca.mtimes([acceleration.matrix.T, mass, acceleration.matrix])
     return ca.mtimes(G.T, G) + LEAST_SQUARES_ENERGY_RATIO * energy, ca.mtimes(G.T, residual)
 
@@ -123,14 +150,16 @@ def level_structure(problem: ControlProblem) -> LevelStructure:
     """
     levels = problem.levels
     # (a twist task's Jacobian is its error's gradient, which depends on a run-time target: sampled too)
-    f = ca.Function("jacobians", [problem.q, problem.ref], [*[lv.jacobian for lv in levels], problem.mass_matrix])
+    f = ca.Function("jacobians", [problem.q, problem.ref, problem.param],
+                    [*[lv.jacobian for lv in levels], problem.mass_matrix])
     robot = problem.robot
     rng = np.random.default_rng(0)  # seeded: a spec always compiles to the same structure
     lo = np.where(np.isfinite(robot.limits.q_min), robot.limits.q_min, -np.pi)
     hi = np.where(np.isfinite(robot.limits.q_max), robot.limits.q_max, np.pi)
     deficient = np.zeros(len(levels), dtype=bool)
     for _ in range(RANK_SAMPLES):
-        out = [np.array(o) for o in f(rng.uniform(lo, hi), rng.uniform(-1.0, 1.0, problem.ref.shape[0]))]
+        out = [np.array(o) for o in f(rng.uniform(lo, hi), rng.uniform(-1.0, 1.0, problem.ref.shape[0]),
+                                      problem.param_layout.defaults)]
         jacobians, M = out[:-1], out[-1]
         N = np.eye(problem.n)
         Minv = np.linalg.inv(M)

@@ -18,6 +18,7 @@ from ..spec.types import as_list
 from ..symbolic import SymbolicRobot
 from ..symbolic.linalg import spd_inverse
 from ..tasks import ReferenceInput, Task, make_task
+from .parameters import ParameterLayout, build_parameters, torque_limit
 
 DEFAULT_WEIGHT_LOWEST = 1e6  # lowest priority level: w ≫ the acceleration energy of null-space motion
 DEFAULT_WEIGHT_RATIO = 1e3  # each level above weighs this much more
@@ -34,6 +35,8 @@ class Level:
     target: ca.SX  # ẍ_d (m)
     error: ca.SX  # Δx (m)
     weight: float
+    # Each row's run-time activation in [0, 1] (None: every task of the level fully active); see hierarchy.py
+    activation: ca.SX | None = None
 
     @property
     def dim(self) -> int:
@@ -44,8 +47,8 @@ class Level:
 class ControlProblem:
     """Symbolic state, dynamics, task levels and limits of one spec.
 
-    The controller's inputs are q, dq, tau_ext and ref. Accelerations are *actual* joint
-    accelerations a = M⁻¹(τ + τ_ext − ν − g); the controller uses τ_ext only when
+    The controller's inputs are q, dq, tau_ext, ref and param (run-time parameters). Accelerations
+    are *actual* joint accelerations a = M⁻¹(τ + τ_ext − ν − g); the controller uses τ_ext only when
     `controller.external_torque` is `measured` (the paper's section III-B), otherwise it
     assumes τ_ext = 0.
     """
@@ -63,8 +66,11 @@ class ControlProblem:
     external_torque: ca.SX  # τ_ext as used by the controller (0 when ignored)
     levels: list[Level]
     acceleration_rows: AccelerationRows  # joint, Cartesian and collision bounds on a
-    torque_max: np.ndarray  # |τ| ≤ τ_max (full torque, gravity included)
+    torque_max: np.ndarray  # |τ| ≤ τ_max (full torque, gravity included), as compiled: the envelope
     period: float
+    param: ca.SX  # input: run-time parameters
+    param_layout: ParameterLayout
+    torque_limit: ca.SX  # |τ| ≤ this at run time (torque_max, or run-time parameters within it)
 
     @property
     def n(self) -> int:
@@ -116,11 +122,15 @@ def build_problem(spec: Spec, robot: Robot) -> ControlProblem:
         layout += task.reference_inputs(offsets[task.name])
     ref = ca.SX.sym("ref", sum(r.size for r in layout))
     tau_ext = ca.SX.sym("tau_ext", n)
+    params = build_parameters(spec, robot, tasks)
 
     levels = []
     for priority, weight in zip(spec.priority_levels, level_weights(spec)):
         members = [t for t in tasks if t.priority == priority]
-        terms = [t.build(sym, ref, offsets[t.name]) for t in members]
+        terms = [t.build(sym, ref, offsets[t.name], params.tasks.get(t.name)) for t in members]
+        activation = None
+        if any(t.name in params.activation for t in members):
+            activation = ca.vertcat(*[ca.repmat(params.activation.get(t.name, ca.SX(1.0)), t.dim, 1) for t in members])
         levels.append(
             Level(
                 priority,
@@ -130,6 +140,7 @@ def build_problem(spec: Spec, robot: Robot) -> ControlProblem:
                 ca.vertcat(*[t.target for t in terms]),
                 ca.vertcat(*[t.error for t in terms]),
                 weight,
+                activation,
             )
         )
 
@@ -137,8 +148,8 @@ def build_problem(spec: Spec, robot: Robot) -> ControlProblem:
     period = spec.controller.period
     rows = AccelerationRows.stack(
         [
-            joint_rows(robot.limits, sym.q, sym.dq, period, robot.joint_names),
-            cartesian_rows(robot.cartesian_bounds, sym, period),
+            joint_rows(robot.limits, sym.q, sym.dq, period, robot.joint_names, params.joint),
+            cartesian_rows(robot.cartesian_bounds, sym, period, params.cartesian),
             collision_rows(resolve_collision(spec, robot)[0], sym, period),
         ],
         n,
@@ -160,4 +171,7 @@ def build_problem(spec: Spec, robot: Robot) -> ControlProblem:
         acceleration_rows=rows,
         torque_max=robot.limits.tau_max,
         period=period,
+        param=params.param,
+        param_layout=params.layout,
+        torque_limit=torque_limit(params, robot.limits.tau_max),
     )

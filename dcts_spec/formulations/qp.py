@@ -120,7 +120,7 @@ def with_limits(
     torque = Affine(problem.torque(acceleration.offset), ca.mtimes(problem.mass_matrix, acceleration.matrix))
     rows = problem.acceleration_rows
     R_c = ca.mtimes(rows.matrix, acceleration.offset) + rows.offset
-    tau_max = ca.DM(problem.torque_max)
+    tau_max = problem.torque_limit
     A = ca.vertcat(torque.matrix, ca.mtimes(rows.matrix, acceleration.matrix))
     lba = ca.vertcat(-tau_max - torque.offset, rows.lower - R_c)
     uba = ca.vertcat(tau_max - torque.offset, rows.upper - R_c)

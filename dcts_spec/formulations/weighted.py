@@ -28,8 +28,10 @@ def weighted_qp(problem: ControlProblem, regularization_hessian: ca.SX, regulari
     for level in problem.levels:
         w = level.weight / top
         J = level.jacobian
-        H += 2.0 * w * ca.mtimes(J.T, J)
-        f += -2.0 * w * ca.mtimes(J.T, level.target - level.bias)
+        # a task's run-time activation scales its weight (0: it is left out)
+        Jw = J if level.activation is None else ca.mtimes(ca.diag(level.activation), J)
+        H += 2.0 * w * ca.mtimes(Jw.T, J)
+        f += -2.0 * w * ca.mtimes(Jw.T, level.target - level.bias)
     w_r = problem.spec.controller.regularization_weight * problem.levels[-1].weight / top
     H += w_r * regularization_hessian + ACCELERATION_REGULARIZATION * ca.SX.eye(n)
     f += w_r * regularization_gradient

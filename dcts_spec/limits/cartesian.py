@@ -10,16 +10,19 @@ from .base import AccelerationRows
 from .viability import acceleration_bounds, state_excess
 
 
-def cartesian_rows(bounds: tuple[CartesianBound, ...], robot: SymbolicRobot, dt: float) -> AccelerationRows:
-    """c̈_min ≤ J_c a + J̇_c q̇ ≤ c̈_max with c̈ bounds shaped from c, ċ as for joints."""
+def cartesian_rows(bounds: tuple[CartesianBound, ...], robot: SymbolicRobot, dt: float,
+                   offsets: list[tuple] | None = None) -> AccelerationRows:
+    """c̈_min ≤ J_c a + J̇_c q̇ ≤ c̈_max with c̈ bounds shaped from c, ċ as for joints. `offsets`:
+    (c_min, c_max) per bound where they are run-time parameters."""
     parts = []
-    for b in bounds:
+    for i, b in enumerate(bounds):
+        c_min, c_max = offsets[i] if offsets else (b.c_min, b.c_max)
         position, _ = robot.frame_placement(b.frame)
         d = ca.DM(b.direction)
         jacobian = ca.mtimes(d.T, robot.frame_jacobian(b.frame)[0:3, :])
         bias = ca.dot(d, robot.frame_bias_acceleration(b.frame)[0:3])
         c, c_dot = ca.dot(d, position), ca.mtimes(jacobian, robot.dq)
-        lo, hi = acceleration_bounds(c, c_dot, b.c_min, b.c_max, b.v_max, float("inf"), b.a_max, dt)
+        lo, hi = acceleration_bounds(c, c_dot, c_min, c_max, b.v_max, float("inf"), b.a_max, dt)
         parts.append(AccelerationRows(jacobian, bias, lo, hi, [f"cartesian:{b.frame}.{b.label}"],
-                                      state_excess(c, c_dot, b.c_min, b.c_max, b.v_max)))
+                                      state_excess(c, c_dot, c_min, c_max, b.v_max)))
     return AccelerationRows.stack(parts, robot.nv)

@@ -23,8 +23,14 @@ from __future__ import annotations
 import casadi as ca
 
 # The state is symbolic in the controller and numeric in the tests; the bounds are then SX or DM.
+# A limit is a number (±inf: none) or a run-time parameter (SX, always finite: it narrows a finite
+# compiled limit), so which terms exist is decided when the controller is compiled.
 Scalar = ca.SX | float
 Bound = ca.SX | ca.DM
+
+
+def _limited(value: Scalar) -> bool:
+    return isinstance(value, ca.SX) or abs(value) != float("inf")
 
 _TINY = 1e-12
 # Beyond a bound, the position terms ask for absurd accelerations (~1/dt²); this keeps the QP
@@ -32,7 +38,7 @@ _TINY = 1e-12
 _HUGE = 1e6
 
 
-def _upper_from_position(x: Scalar, v: Scalar, x_max: float, braking: float, dt: float) -> Bound:
+def _upper_from_position(x: Scalar, v: Scalar, x_max: Scalar, braking: Scalar, dt: float) -> Bound:
     """Largest a keeping x ≤ x_max during the step, apex of the parabola included."""
     end_of_step = 2.0 * (x_max - x - dt * v) / dt**2
     stop = -v / dt
@@ -47,7 +53,7 @@ def _upper_from_position(x: Scalar, v: Scalar, x_max: float, braking: float, dt:
     return ca.if_else(inside_apex, apex, end_of_step)
 
 
-def _upper_from_viability(x: Scalar, v: Scalar, x_max: float, braking: float, dt: float) -> Bound:
+def _upper_from_viability(x: Scalar, v: Scalar, x_max: Scalar, braking: Scalar, dt: float) -> Bound:
     """Largest a with which the next state x⁺ = x + dt v + ½dt² a, v⁺ = v + dt a can still stop
     before x_max braking at b *in steps of dt*: v⁺² + b dt v⁺ ≤ 2 b (x_max − x⁺), i.e.
     dt² a² + (2 dt v + 2 b dt²) a + v² + b dt v − 2 b (x_max − x − dt v) ≤ 0.
@@ -67,44 +73,44 @@ def _upper_from_viability(x: Scalar, v: Scalar, x_max: float, braking: float, dt
     return ca.fmax(ca.if_else(delta >= 0, root, stop), stop)
 
 
-def _upper(x: Scalar, v: Scalar, x_max: float, braking: float, dt: float) -> Bound:
+def _upper(x: Scalar, v: Scalar, x_max: Scalar, braking: Scalar, dt: float) -> Bound:
     return ca.fmin(_upper_from_position(x, v, x_max, braking, dt), _upper_from_viability(x, v, x_max, braking, dt))
 
 
-def state_excess(x: Scalar, v: Scalar, x_min: float, x_max: float, v_max: float) -> Bound:
+def state_excess(x: Scalar, v: Scalar, x_min: Scalar, x_max: Scalar, v_max: Scalar) -> Bound:
     """How far the state is beyond [x_min, x_max] or |v| ≤ v_max, in the coordinate's own units
     (the larger of the two; 0 within, and for a side without a limit)."""
     excess = ca.SX(0.0)
-    for beyond, limited in ((x - x_max, x_max != float("inf")), (x_min - x, x_min != -float("inf")),
-                            (ca.fabs(v) - v_max, v_max != float("inf"))):
+    for beyond, limited in ((x - x_max, _limited(x_max)), (x_min - x, _limited(x_min)),
+                            (ca.fabs(v) - v_max, _limited(v_max))):
         if limited:
             excess = ca.fmax(excess, beyond)
     return excess
 
 
 def acceleration_bounds(
-    x: Scalar, v: Scalar, x_min: float, x_max: float, v_max: float, accel_limit: float, braking: float, dt: float
+    x: Scalar, v: Scalar, x_min: Scalar, x_max: Scalar, v_max: Scalar, accel_limit: Scalar, braking: Scalar, dt: float
 ) -> tuple[Bound, Bound]:
     """(lower, upper) bounds on the acceleration of a coordinate for the next control period.
 
     x and v are the state (CasADi expressions or numbers); the limits are numbers, ±inf where
-    there is none. The bounds are clipped to ±_HUGE, so they are finite even without any limit.
+    there is none, or run-time parameters. The bounds are clipped to ±_HUGE, so they are finite even without any limit.
     """
     inf = float("inf")
     upper = ca.SX(inf)
     lower = ca.SX(-inf)
-    if x_max != inf:
+    if _limited(x_max):
         upper = _upper(x, v, x_max, braking, dt)
-    if x_min != -inf:
+    if _limited(x_min):
         lower = -_upper(-x, -v, -x_min, braking, dt)  # the mirror image x → −x
-    if v_max != inf:
+    if _limited(v_max):
         # The velocity bound comes first: the position terms are clamped into it, so a joint
         # beyond its position bound heads back at the velocity limit, not faster (as min/max
         # with a midpoint on conflict did: 3.6 × the velocity limit after a push).
         slowest, fastest = (-v_max - v) / dt, (v_max - v) / dt
         upper = ca.fmin(ca.fmax(upper, slowest), fastest)
         lower = ca.fmin(ca.fmax(lower, slowest), fastest)
-    if accel_limit != inf:
+    if _limited(accel_limit):
         upper = ca.fmin(ca.fmax(upper, -accel_limit), accel_limit)
         lower = ca.fmin(ca.fmax(lower, -accel_limit), accel_limit)
     upper = ca.fmin(ca.fmax(upper, -_HUGE), _HUGE)

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import casadi as ca
 import numpy as np
@@ -36,6 +36,17 @@ class ReferenceInput:
             "unit": self.unit,
             "components": list(self.components),
         }
+
+
+@dataclass
+class TaskParameters:
+    """Run-time values (symbols of the controller's `param` input) replacing compiled ones; None:
+    the compiled value."""
+
+    kp: ca.SX | None = None
+    kd: ca.SX | None = None
+    max_velocity: ca.SX | None = None
+    reference: dict[str, ca.SX] = field(default_factory=dict)  # constant reference fields
 
 
 @dataclass
@@ -110,30 +121,34 @@ class Task(ABC):
             offset += size
         return out
 
-    def build(self, robot: SymbolicRobot, ref: ca.SX, offset: int) -> TaskTerms:
-        """Symbolic terms of the task; run-time references are read from `ref` at `offset`."""
+    def build(self, robot: SymbolicRobot, ref: ca.SX, offset: int, params: TaskParameters | None = None) -> TaskTerms:
+        """Symbolic terms of the task; run-time references are read from `ref` at `offset`, run-time
+        parameters (gains, a constant reference) from `params`."""
+        params = params or TaskParameters()
         if self.reference_is_input:
             reference = {r.field: ref[r.offset : r.offset + r.size] for r in self.reference_inputs(offset)}
         else:
-            reference = {k: ca.SX(ca.DM(v)) for k, v in self.constant_reference().items()}
+            reference = {k: params.reference.get(k, ca.SX(ca.DM(v))) for k, v in self.constant_reference().items()}
         jacobian, bias, error = self._terms(robot, reference)
         velocity = ca.mtimes(jacobian, robot.dq)
         velocity_ff = reference.get("velocity", ca.SX.zeros(self.dim))
         acceleration_ff = reference.get("acceleration", ca.SX.zeros(self.dim))
-        target = acceleration_ff + self._feedback(error, velocity - velocity_ff)
+        target = acceleration_ff + self._feedback(error, velocity - velocity_ff, params)
         return TaskTerms(jacobian, bias, error, target)
 
-    def _feedback(self, error: ca.SX, velocity_error: ca.SX) -> ca.SX:
+    def _feedback(self, error: ca.SX, velocity_error: ca.SX, params: TaskParameters) -> ca.SX:
         """ẍ_d = kp Δx − kd ẋ, or with `max_velocity` the velocity-saturated law of the paper's
         experiment 3: ẍ_d = −kd (ẋ − v ẋ_d), ẋ_d = (kp/kd) Δx, v = min(1, v_sat/‖ẋ_d‖).
 
         The paper prints v_sat/‖ẋ_d‖²; that is not a velocity bound (its units are wrong), so the
         usual saturation ‖v ẋ_d‖ ≤ v_sat is used.
         """
-        kp, kd = ca.DM(self.kp), ca.DM(self.kd)
+        kp = ca.DM(self.kp) if params.kp is None else params.kp
+        kd = ca.DM(self.kd) if params.kd is None else params.kd
         if self.max_velocity is None:
             return kp * error - kd * velocity_error
+        max_velocity = self.max_velocity if params.max_velocity is None else params.max_velocity
         desired_velocity = (kp / kd) * error
         speed = ca.norm_2(desired_velocity)
-        v = ca.fmin(1.0, self.max_velocity / ca.fmax(speed, 1e-12))
+        v = ca.fmin(1.0, max_velocity / ca.fmax(speed, 1e-12))
         return -kd * (velocity_error - v * desired_velocity)

@@ -1,0 +1,171 @@
+"""Run-time parameters in the Python runtime: defaults are the compiled controller, a set means
+what recompiling with it would, activation 0 removes a task, and a change is ramped."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import yaml
+
+from dcts_spec.controller import Controller, build_controller
+from dcts_spec.formulations.parameters import ParameterError
+from dcts_spec.spec import load_spec_text
+from dcts_spec.validate import validate_spec
+
+SPEC = {
+    "version": 1,
+    "name": "params",
+    "robot": {"model": "iiwa14"},
+    "limits": {"joint_torque": {"max": 100}, "joint_acceleration": {"max": 30},
+               "cartesian": [{"frame": "tool", "axis": "z", "min": 0.1, "max": 1.2}]},
+    "tasks": [
+        {"name": "tool", "type": "position", "frame": "tool", "priority": 1,
+         "gains": {"kp": 100, "kd": 20, "max_velocity": 0.5}, "reference": {"position": [0.5, 0.1, 0.6]}},
+        {"name": "posture", "type": "joint", "priority": 2, "gains": {"kp": 10, "kd": 5},
+         "reference": {"q": [0, 30, 0, -60, 0, 60, 0], "unit": "deg"}},
+    ],
+    "scenario": {"duration": 0.5, "initial_q": [0, 30, 0, -60, 0, 60, 0], "unit": "deg"},
+}
+ALL = {"tasks": {"tool": ["kp", "kd", "max_velocity", "reference", "activation"], "posture": ["kp", "kd"]},
+       "limits": ["joint_position", "joint_velocity", "joint_acceleration", "joint_torque", "cartesian"]}
+Q = np.radians([10, 35, -5, -70, 8, 55, 3])
+DQ = np.array([0.1, -0.05, 0.2, 0.1, -0.1, 0.05, 0.3])
+
+
+def _controller(formulation: str, parameters: dict | None = None, **changes) -> Controller:
+    data = yaml.safe_load(yaml.safe_dump(SPEC))
+    for path, value in changes.items():
+        *keys, last = path.split("__")
+        node = data
+        for key in keys:
+            node = node[int(key)] if key.isdigit() else node[key]
+        node[last] = value
+    if parameters is not None:
+        data["parameters"] = parameters
+    return build_controller(load_spec_text(yaml.safe_dump(data), "params.yaml"), formulation)
+
+
+def _settled(c: Controller, values: dict) -> None:
+    c.set_params(values)
+    for _ in range(50):
+        c.step(Q, DQ)
+
+
+@pytest.mark.parametrize("formulation", ["dcts", "osc", "qp_mt"])
+def test_the_defaults_are_the_compiled_controller(formulation):
+    plain, param = _controller(formulation), _controller(formulation, ALL)
+    assert param.param_size == 3 + 3 + 1 + 3 + 1 + 7 + 7 + 7 + 7 + 7 + 7 + 7 + 2
+    for k in range(4):
+        q, dq = Q + 0.1 * k, DQ * (1 - 0.3 * k)
+        a, b = plain.step(q, dq), param.step(q, dq)
+        assert a.status == b.status
+        np.testing.assert_allclose(b.tau, a.tau, rtol=1e-6, atol=1e-6)
+
+
+@pytest.mark.parametrize("formulation", ["dcts", "osc"])
+def test_a_parameter_set_means_what_compiling_it_would(formulation):
+    param = _controller(formulation, ALL)
+    _settled(param, {"tool.kp": [60, 80, 100], "tool.kd": 15, "tool.max_velocity": 0.3, "tool.position": [0.45, 0, 0.7],
+                     "posture.kp": 20, "joint_torque.max": 90, "joint_velocity.max": 1.2,
+                     "cartesian.tool.z.max": 1.0})
+    compiled = _controller(formulation, None, tasks__0__gains={"kp": [60, 80, 100], "kd": 15, "max_velocity": 0.3},
+                           tasks__0__reference={"position": [0.45, 0, 0.7]},
+                           tasks__1__gains={"kp": 20, "kd": 5},
+                           limits={"joint_torque": {"max": 90}, "joint_velocity": {"max": 1.2}, "joint_acceleration": {"max": 30},
+                                   "cartesian": [{"frame": "tool", "axis": "z", "min": 0.1, "max": 1.0}]})
+    for k in range(3):
+        q, dq = Q - 0.05 * k, DQ * (1 + k)
+        a, b = compiled.step(q, dq), param.step(q, dq)
+        assert a.status == b.status
+        np.testing.assert_allclose(b.tau, a.tau, rtol=1e-6, atol=1e-6)
+        assert np.all(np.abs(b.tau) <= 90 + 1e-9)
+
+
+@pytest.mark.parametrize("formulation", ["dcts", "osc", "qp_mt"])
+def test_activation_zero_is_the_spec_without_the_task(formulation):
+    param = _controller(formulation, {"tasks": {"tool": ["activation"]}})
+    _settled(param, {"tool.activation": 0.0})
+    data = yaml.safe_load(yaml.safe_dump(SPEC))
+    data["tasks"] = data["tasks"][1:]
+    alone = build_controller(load_spec_text(yaml.safe_dump(data), "alone.yaml"), formulation)
+    for k in range(3):
+        q, dq = Q + 0.07 * k, DQ * (1 - 0.4 * k)
+        a, b = alone.step(q, dq), param.step(q, dq)
+        assert b.status == a.status == 0
+        # the posture gets exactly the acceleration it gets alone (qp_mt: up to its regularization)
+        np.testing.assert_allclose(b.ddq, a.ddq, rtol=1e-5, atol=1e-5 if formulation != "qp_mt" else 1e-3)
+
+
+def test_activation_fades_the_task():
+    """From 1 to 0 the acceleration moves steadily from the task's to the one without it."""
+    param = _controller("osc", {"tasks": {"tool": ["activation"]}})
+    ddq = {}
+    for a in (1.0, 0.75, 0.5, 0.25, 0.0):
+        param.reset_params()
+        param.set_params({"tool.activation": a})
+        ddq[a] = param.step(Q, DQ).ddq
+    away = [np.linalg.norm(ddq[a] - ddq[0.0]) for a in (1.0, 0.75, 0.5, 0.25)]
+    assert all(x > y for x, y in zip(away, away[1:])) and away[-1] > 0
+
+
+def test_a_gain_step_is_ramped_linearly():
+    param = _controller("osc", {"tasks": {"tool": ["kp"]}, "ramp_time": 0.01}, tasks__0__gains={"kp": 100, "kd": 20})
+    steps = 10
+
+    def step() -> tuple[np.ndarray, np.ndarray]:
+        tau = param.step(Q, DQ).tau
+        return tau, param.evaluate_data(Q, DQ)["tau0"].ravel()  # osc: the torque before clipping
+
+    before, raw_before = step()
+    param.set_params({"tool.kp": 400})
+    taus, raws = zip(*[step() for _ in range(steps + 2)])
+    # osc's torque is affine in kp: each step moves a tenth of the way, the last lands on it
+    for k, raw in enumerate(raws[:steps], start=1):
+        np.testing.assert_allclose(raw, raw_before + k / steps * (raws[-1] - raw_before), rtol=1e-9, atol=1e-9)
+    np.testing.assert_array_equal(raws[steps - 1], raws[-1])
+    jumps = np.abs(np.diff(np.vstack([before, *taus]), axis=0)).max(axis=1)
+    assert jumps.max() <= np.abs(raws[-1] - raw_before).max() / steps * (1 + 1e-9) + 1e-12
+    assert np.abs(taus[-1] - before).max() > 5.0  # a step worth ramping
+
+
+def test_a_new_set_during_a_ramp_starts_from_where_it_is():
+    param = _controller("osc", {"tasks": {"tool": ["kp"]}, "ramp_time": 0.004})
+    param.set_params({"tool.kp": 200})
+    param.step(Q, DQ)
+    param.step(Q, DQ)  # half way: 150
+    param.set_params({"tool.kp": 100})
+    assert param._ramp.now[0] == pytest.approx(150)
+    values = [param.step(Q, DQ) and param._ramp.now[0] for _ in range(4)]
+    np.testing.assert_allclose(values, [137.5, 125, 112.5, 100])
+
+
+@pytest.mark.parametrize(("values", "field", "words"), [
+    ({"tool.kp": np.nan}, "tool.kp", "not finite"),
+    ({"tool.kd": -1}, "tool.kd", "outside"),
+    ({"tool.kd": 0}, "tool.kd", "outside (0"),  # kp/kd divides with max_velocity
+    ({"joint_torque.max": 101}, "joint_torque.max", "compiled envelope"),
+    ({"joint_acceleration.max": 0}, "joint_acceleration.max", "outside"),
+    ({"joint_position.min": -3, "joint_position.max": 3}, "joint_position.min", "compiled envelope"),
+    ({"joint_position.min": 0.5, "joint_position.max": 0.4}, "joint_position.max", "above the matching min"),
+    ({"cartesian.tool.z.min": 1.3}, "cartesian.tool.z.min", "compiled envelope"),
+    ({"tool.activation": 1.5}, "tool.activation", "outside [0, 1]"),
+    ({"tool.stiffness": 1}, "tool.stiffness", "no such run-time parameter"),
+    ({"posture.kp": [1, 2]}, "posture.kp", "takes 7"),
+])
+def test_an_invalid_set_is_refused_and_the_old_one_kept(values, field, words):
+    param = _controller("osc", ALL)
+    param.set_params({"tool.kp": 50})
+    kept = param.params()
+    with pytest.raises(ParameterError) as info:
+        param.set_params(values)
+    assert info.value.field == field and words in str(info.value)
+    assert param.params() == kept
+
+
+def test_limits_keep_their_compiled_structure():
+    """A run-time limit replaces a finite compiled one; the rows and terms stay the compiled ones."""
+    plain, param = _controller("dcts"), _controller("dcts", ALL)
+    assert param.bound_names == plain.bound_names and param.na == plain.na
+    # (the tool's activation frees its 3 directions for the posture below: 3 more null-space variables)
+    assert param.nx == plain.nx + 3
+    validate_spec(param.spec)
