@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import os
+import signal
 import sys
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -392,8 +393,15 @@ def init(
     typer.echo(f"wrote {file} (spec {name!r}, robot {robot}); next: dcts validate {file}, dcts simulate {file}")
 
 
+def _exit_on_sigterm(signum: int, _frame) -> None:
+    # SIGTERM's default ends the process at once; as an exit, the staging folders of a compile
+    # or a run are removed on the way out, as on Ctrl-C
+    sys.exit(128 + signum)
+
+
 def main() -> None:
     """Entry point: no Python traceback reaches the user unless DCTS_DEBUG is set."""
+    signal.signal(signal.SIGTERM, _exit_on_sigterm)
     try:
         app()
     except SpecError as error:

@@ -12,9 +12,13 @@ from __future__ import annotations
 import json
 import secrets
 import shutil
+import time
 from pathlib import Path
 
 OWNED = ".dcts-owned"  # JSON list of the top-level names dcts wrote
+# A staging folder this old was left by a run that was killed (SIGKILL, a power cut): a live run
+# finishes its staging in minutes, and a younger one may belong to a run still going.
+STALE_STAGING_SECONDS = 3600.0
 
 
 class OutputFolderError(Exception):
@@ -65,3 +69,17 @@ def install(staging: Path, folder: Path) -> None:
     finally:
         shutil.rmtree(trash, ignore_errors=True)
     staging.rmdir()
+
+
+def remove_stale_staging(parent: Path, prefix: str, suffix: str = "") -> None:
+    """Remove the staging folders `parent/<prefix>*<suffix>` older than STALE_STAGING_SECONDS:
+    names only dcts makes, next to an output it is about to write, left by a killed run."""
+    if not parent.is_dir():
+        return
+    now = time.time()
+    for path in parent.glob(f"{prefix}*{suffix}"):
+        try:
+            if path.is_dir() and not path.is_symlink() and now - path.stat().st_mtime > STALE_STAGING_SECONDS:
+                shutil.rmtree(path, ignore_errors=True)
+        except OSError:
+            pass

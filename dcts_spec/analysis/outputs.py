@@ -8,7 +8,7 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
-from ..files import check_writable, install
+from ..files import check_writable, install, remove_stale_staging
 from .plots import write_plots
 from .run import RunResult
 
@@ -26,6 +26,7 @@ def atomic_directory(path: Path) -> Iterator[Path]:
     path = Path(path)
     check_writable(path, allow_unmarked=earlier_output)
     path.parent.mkdir(parents=True, exist_ok=True)
+    remove_stale_staging(path.parent, f".{path.name}.", ".partial")
     # mkdir, not mkdtemp: the folder gets the user's usual permissions.
     staging = path.parent / f".{path.name}.{secrets.token_hex(6)}.partial"
     staging.mkdir()

@@ -21,7 +21,7 @@ from functools import lru_cache
 from pathlib import Path
 
 from ..choices import TARGETS
-from ..files import OutputFolderError, check_writable, install
+from ..files import OutputFolderError, check_writable, install, remove_stale_staging
 from ..phases import building_controller, phase
 from ..controller import Controller
 from ..robot.model import Robot
@@ -406,6 +406,7 @@ def compile_bundle(
     controller, model = _controller_and_model(spec_obj, formulation, robot, model_changes)
 
     created = _make_parents(out_dir.parent)
+    remove_stale_staging(out_dir.parent, f".{out_dir.name}.tmp-")
     try:
         tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.tmp-", dir=out_dir.parent))
         umask = os.umask(0)

@@ -1,0 +1,46 @@
+"""Staging folders: a killed command leaves none behind (SIGTERM), and the next run removes what a
+SIGKILL left (issue 12: `.out.tmp-*` folders of ~800 KB that no later run removed)."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from dcts_spec.files import STALE_STAGING_SECONDS, remove_stale_staging
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_sigterm_during_compile_leaves_no_staging_folder(tmp_path):
+    out = tmp_path / "bundle"
+    env = {**os.environ, "DCTS_CACHE_DIR": str(tmp_path / "cache")}
+    command = ["compile", str(ROOT / "specs" / "minimal.yaml"), "-o", str(out), "-q"]
+    process = subprocess.Popen([sys.executable, "-c", f"import sys; sys.argv = ['dcts', *{command!r}]; "
+                                "from dcts_spec.cli import main; main()"], cwd=ROOT, env=env,
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    deadline = time.monotonic() + 120
+    while not list(tmp_path.glob(".bundle.tmp-*")) and process.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert process.poll() is None, "the compile ended before its staging folder could be seen"
+    process.send_signal(signal.SIGTERM)
+    process.wait(timeout=60)
+    assert process.returncode == 128 + signal.SIGTERM
+    assert not list(tmp_path.glob(".bundle.tmp-*")) and not out.exists()
+
+
+def test_the_next_run_removes_only_old_staging_folders_of_its_output(tmp_path):
+    old, young = tmp_path / ".bundle.tmp-old", tmp_path / ".bundle.tmp-young"
+    other, user = tmp_path / ".other.tmp-old", tmp_path / "bundle.tmp-notes"
+    for folder in (old, young, other, user):
+        folder.mkdir()
+        (folder / "file").write_text("x")
+    past = time.time() - 2 * STALE_STAGING_SECONDS
+    for folder in (old, other, user):
+        os.utime(folder, (past, past))
+    remove_stale_staging(tmp_path, ".bundle.tmp-")
+    assert not old.exists()
+    assert young.exists() and other.exists() and user.exists()  # a live run's, another output's, a user's
