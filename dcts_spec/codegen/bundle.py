@@ -23,13 +23,14 @@ import numpy as np
 
 from ..controller import ACTIVE_TOLERANCE, DATA_OUTPUTS, STATE_TOLERANCE, TORQUE_TOLERANCE, Controller
 from ..formulations.qp import BOUNDS, HARD
+from ..parameter_ramp import ramp_steps
 from ..solve import BOUND_TOLERANCE, DAQP_SETTINGS
 from ..solve import lexicographic
 from ..spec import Spec
 from .layout import (C_DATA_OUTPUTS, array_lengths, casadi_work_lengths, daqp_storage, header_fields, workspace_fields,
                      workspace_struct)
-from .datasheet import (conventions_text, fmt_list, gains_text, limits_text, model_texts, parameters_text,
-                        ref_layout_text, sizes_text, status_text, timing_text)
+from .datasheet import (conventions_text, fmt_list, gains_text, limits_text, model_texts, parameters_doc_text,
+                        parameters_struct, parameters_text, ref_layout_text, sizes_text, status_text, timing_text)
 from .model import model_record
 from .spec_copy import copy_spec
 from .states import State, golden_states
@@ -201,21 +202,25 @@ class Golden:
 def compute_golden(controller: Controller, states: list[State]) -> Golden:
     """Run the Python runtime over the states in order (a fresh controller state first)."""
     controller._last_q = None
+    controller.reset_params()
     n, nx, levels = controller.n, controller.nx, len(controller.priorities)
     count = len(states)
     tau, ddq = np.zeros((count, n)), np.zeros((count, n))
     scaling, x = np.zeros((count, levels)), np.zeros((count, max(nx, 1)))
     nxs, status = np.zeros(count, dtype=int), np.zeros(count, dtype=int)
     for k, s in enumerate(states):
+        if s.params is not None:
+            controller.set_params(s.params)
         r = controller.step(s.q, s.dq, s.tau_ext, s.ref if controller.ref_size else None)
         tau[k], ddq[k], scaling[k], status[k] = r.tau, r.ddq, r.scaling, r.status
         nxs[k] = r.x.size
         x[k, : r.x.size] = r.x
     controller._last_q = None
+    controller.reset_params()
     return Golden(states, tau, ddq, scaling, x, nxs, status)
 
 
-def golden_sources(name: str, golden: Golden, nref_alloc: int) -> tuple[str, str]:
+def golden_sources(name: str, golden: Golden, nref_alloc: int, nparam_alloc: int) -> tuple[str, str]:
     """The golden vectors as C arrays (exact hexadecimal literals): header and source."""
     big = name.upper()
     count = len(golden.states)
@@ -224,6 +229,7 @@ def golden_sources(name: str, golden: Golden, nref_alloc: int) -> tuple[str, str
         return ",\n".join("    {" + c_array(r) + "}" for r in rows)
 
     refs = [s.ref if s.ref.size else np.zeros(nref_alloc) for s in golden.states]
+    params = [s.params if s.params is not None and s.params.size else np.zeros(nparam_alloc) for s in golden.states]
     header = f"""/* {name}_golden.h — golden vectors computed by the Python runtime (dcts-spec {version()}). */
 #ifndef {big}_GOLDEN_H
 #define {big}_GOLDEN_H
@@ -236,6 +242,8 @@ extern const double {name}_golden_q[{count}][{big}_NQ];
 extern const double {name}_golden_dq[{count}][{big}_NQ];
 extern const double {name}_golden_tau_ext[{count}][{big}_NQ];
 extern const double {name}_golden_ref[{count}][{big}_NREF_ALLOC];
+extern const int {name}_golden_param_set[{count}]; /* 1: take golden_params[k] before step k */
+extern const double {name}_golden_params[{count}][{big}_NPARAM_ALLOC];
 extern const double {name}_golden_tau[{count}][{big}_NQ];
 extern const double {name}_golden_ddq[{count}][{big}_NQ];
 extern const double {name}_golden_scaling[{count}][{big}_NLEVELS_ALLOC];
@@ -261,6 +269,10 @@ const double {name}_golden_tau_ext[{count}][{big}_NQ] = {{
 }};
 const double {name}_golden_ref[{count}][{big}_NREF_ALLOC] = {{
 {table(refs)}
+}};
+const int {name}_golden_param_set[{count}] = {{{", ".join(str(int(s.params is not None)) for s in golden.states)}}};
+const double {name}_golden_params[{count}][{big}_NPARAM_ALLOC] = {{
+{table(params)}
 }};
 const double {name}_golden_tau[{count}][{big}_NQ] = {{
 {table(golden.tau)}
@@ -292,6 +304,7 @@ def golden_json(golden: Golden) -> dict:
             {
                 "kind": s.kind,
                 "q": vec(s.q), "dq": vec(s.dq), "tau_ext": vec(s.tau_ext), "ref": vec(s.ref),
+                **({"params": vec(s.params)} if s.params is not None else {}),
                 "tau": vec(golden.tau[k]), "ddq": vec(golden.ddq[k]), "scaling": vec(golden.scaling[k]),
                 "x": vec(golden.x[k, : golden.nx[k]]), "status": int(golden.status[k]),
             }
@@ -319,6 +332,36 @@ def _golden_tolerances(formulation: str) -> dict[str, str]:
     if formulation == "dcts":
         return {"GOLDEN_TOLERANCE": "1e-6", "GOLDEN_RELAXED_TOLERANCE": "1e-3"}
     return {"GOLDEN_TOLERANCE": "1e-8", "GOLDEN_RELAXED_TOLERANCE": "1e-8"}
+
+
+def _parameter_values(controller: Controller, name: str, big: str) -> dict[str, object]:
+    """The template values of the run-time parameters (formulations/parameters.py)."""
+    layout = controller.param_layout
+    fields, macros = parameters_struct(controller, big)
+    flat_field = [i for i, e in enumerate(layout.entries) for _ in range(e.size)]
+
+    def values(rows) -> str:
+        return c_array(rows) if layout.size else "0"
+
+    return {
+        "NPARAM": layout.size,
+        "NPARAM_ALLOC": max(layout.size, 1),
+        "NPARAM_FIELDS": len(layout.entries),
+        "NPARAM_ORDER": len(layout.order),
+        "NPARAM_ORDER_ALLOC": max(len(layout.order), 1),
+        "RAMP_STEPS": ramp_steps(layout.ramp_time, controller.problem.period),
+        "PARAM_DEFAULTS": values(layout.defaults),
+        "PARAM_LOWER": values([v for e in layout.entries for v in e.lower]),
+        "PARAM_UPPER": values([v for e in layout.entries for v in e.upper]),
+        "PARAM_LOWER_OPEN": ", ".join(str(int(e.lower_open)) for e in layout.entries for _ in range(e.size)) or "0",
+        "PARAM_FIELD": ", ".join(str(i) for i in flat_field) or "0",
+        "PARAM_ORDER": ", ".join(f"{{{i}, {j}}}" for i, j in layout.order) or "{0, 0}",
+        "TORQUE_PARAM": ", ".join(str(i) for i in layout.torque_index),
+        "PARAM_NAMES": ", ".join(json.dumps(e.name) for e in layout.entries) + (", " if layout.entries else "") + "NULL",
+        "PARAM_DOC": parameters_doc_text(controller, name),
+        "PARAM_FIELDS": fields,
+        "PARAM_MACROS": macros,
+    }
 
 
 def generate_sources(
@@ -360,7 +403,7 @@ def generate_sources(
     length = array_lengths(nx, na, levels, nref, nr, npls)
     work_length = casadi_work_lengths(work)
     layout_text, layout_macros = ref_layout_text(controller, big)
-    fields = workspace_fields(n, nref, nx, na, levels, work, nr, npls)
+    fields = workspace_fields(n, nref, nx, na, levels, work, nr, npls, controller.param_size)
     workspace_bytes = ctypes.sizeof(workspace_struct(fields, solver_bytes))
     daqp_doubles, daqp_ints = daqp_storage(nx, na, nr)
     daqp_bytes = 8 * daqp_doubles + ctypes.sizeof(ctypes.c_int) * daqp_ints
@@ -441,8 +484,7 @@ def generate_sources(
         "TORQUE_TOLERANCE": c_double(TORQUE_TOLERANCE),
         "DAQP_SETTINGS": daqp_settings_code(settings),
         "TAU_MAX_ARRAY": c_array(tau_max),
-        "PARAM_DEFAULTS": c_array(controller.param_layout.defaults) if controller.param_size else "0",
-        "NPARAM_ALLOC": max(controller.param_size, 1),
+        **_parameter_values(controller, name, big),
         "DAMPING_ARRAY": c_array(damping),
         "NEEDS_DAQP": int(nx > 0),
         **_golden_tolerances(controller.formulation),
@@ -461,7 +503,8 @@ def generate_sources(
     }
     states = golden_states(controller, golden_count)
     golden = compute_golden(controller, states)
-    files[f"{name}_golden.h"], files[f"{name}_golden.c"] = golden_sources(name, golden, length["nref"])
+    files[f"{name}_golden.h"], files[f"{name}_golden.c"] = golden_sources(name, golden, length["nref"],
+                                                                         max(controller.param_size, 1))
     if nx:
         if daqp_source is None:
             raise CodegenError("DAQP's C sources are needed for a QP formulation (codegen.build.daqp_sources)")
@@ -498,6 +541,9 @@ def generate_sources(
         "nlevels": levels,
         "priorities": controller.priorities,
         "ref_layout": [r.to_dict() for r in controller.ref_layout],
+        "nparam": controller.param_size,
+        "param_layout": controller.param_layout.to_dict(),
+        "ramp_steps": ramp_steps(controller.param_layout.ramp_time, controller.problem.period),
         "variables": list(qp.variables) if qp is not None else [],
         "bound_names": controller.bound_names if qp is not None else [],
         "least_squares_rows": npls,

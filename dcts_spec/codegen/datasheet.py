@@ -12,6 +12,8 @@ import textwrap
 import numpy as np
 
 from ..controller import Controller
+from ..formulations.parameters import ParameterInput
+from ..parameter_ramp import ramp_steps
 from ..limits.joint import DEFAULT_BRAKING
 from ..limits.naming import interval_text, joint_unit
 from ..tasks import JointTask, Task
@@ -249,6 +251,58 @@ def limits_text(controller: Controller) -> str:
             lines.append(f" *     (the spec gives normal {fmt_list(spec_bound.normal)} in frame {spec_bound.expressed_in}: "
                          "d and the offsets above are that plane in the world)")
     return "\n".join(lines)
+
+
+# -- run-time parameters ---------------------------------------------------------------------------
+
+
+def _range(e: ParameterInput) -> str:
+    lower = sorted(set(e.lower))
+    upper = sorted(set(e.upper))
+    if len(lower) == 1 and len(upper) == 1:
+        return f"{'(' if e.lower_open else '['}{number(lower[0])}, {number(upper[0])}]"
+    if e.name.startswith(("joint_", "cartesian.")):
+        return "(0, compiled]" if e.lower_open else "within the compiled [min, max]"
+    return "per component"
+
+
+def parameters_doc_text(controller: Controller, name: str) -> str:
+    """The run-time parameters: the API in short, and each field's unit, default and range."""
+    layout = controller.param_layout
+    if not layout.entries:
+        return (" * Run-time parameters: none (the spec has no `parameters` section); the gains and limits\n"
+                " * below are constants of the code.")
+    steps = ramp_steps(layout.ramp_time, controller.problem.period)
+    lines = wrap(
+        f"Run-time parameters ({name}_params, SI units; the compiled values are the defaults). "
+        f"{name}_set_params checks a whole set and either takes it or keeps the old one, naming the wrong "
+        f"field; a set taken is reached linearly over {steps} step(s) ({number(layout.ramp_time)} s), so a "
+        "change makes no torque jump. Limits only narrow: each stays within its compiled value.")
+    rows = [["field", "unit", "default", "range", "components"]]
+    for e in layout.entries:
+        field = e.c_name if e.size == 1 else f"{e.c_name}[{e.size}]"
+        rows.append([field, e.unit or "-", _values(np.array(e.default)), _range(e),
+                     " ".join(e.components) if e.size > 1 else ""])
+    lines.append(columns(rows))
+    if any(e.name.endswith(".activation") for e in layout.entries):
+        lines += wrap("activation: 1 = the task as compiled; 0 = as if it were not in the spec (it neither moves "
+                      "the robot nor takes directions from the levels below); in between a damped least-squares "
+                      "task that gets about that fraction of its acceleration.")
+    return "\n".join(lines)
+
+
+def parameters_struct(controller: Controller, big: str) -> tuple[str, str]:
+    """The fields of <name>_params and the field-index macros."""
+    entries = controller.param_layout.entries
+    if not entries:
+        return "    double unused; /* no run-time parameters */", "/* (no run-time parameters) */"
+    fields, macros = [], []
+    for i, e in enumerate(entries):
+        declaration = f"double {e.c_name}" + (f"[{e.size}]" if e.size > 1 else "") + ";"
+        detail = e.unit + (f", {' '.join(e.components)}" if e.size > 1 else "")
+        fields.append(f"    {declaration:<40} /* {detail.strip(', ') or 'unitless'} */")
+        macros.append(f"#define {big}_PARAM_{e.c_name.upper()} {i}")
+    return "\n".join(fields), "\n".join(macros)
 
 
 # -- statuses, model, timing -----------------------------------------------------------------------

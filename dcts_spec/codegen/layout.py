@@ -89,9 +89,10 @@ def info_struct(nq: int, nlevels: int, nx: int, nr: int) -> type[ctypes.Structur
 
 
 def workspace_fields(nq: int, nref: int, nx: int, na: int, nlevels: int, casadi_work: dict, nr: int,
-                     np_: int) -> list[tuple[str, str, int, str]]:
+                     np_: int, nparam: int = 0) -> list[tuple[str, str, int, str]]:
     """The workspace struct's fields before DAQP's storage: (name, C type, count, comment), for the
-    generated header (`header_fields`) and its ctypes mirror (`workspace_struct`) alike."""
+    generated header (`header_fields`) and its ctypes mirror (`workspace_struct`) alike. nparam:
+    entries of the run-time parameter vector."""
     n = array_lengths(nx, na, nlevels, nref, nr, np_)
     work = casadi_work_lengths(casadi_work)
     nxa, nc, nx2 = n["nx"], n["nc"], n["nx2"]
@@ -166,6 +167,11 @@ def workspace_fields(nq: int, nref: int, nx: int, na: int, nlevels: int, casadi_
         ("dq_finite", "double", nq, ""),
         ("fallback", "double", nq, ""),
         ("have_last_q", "int", 0, ""),
+        ("param_from", "double", max(nparam, 1), "run-time parameters: the ramp from one set to the last one taken"),
+        ("param_to", "double", max(nparam, 1), ""),
+        ("param_now", "double", max(nparam, 1), "the values of this step"),
+        ("tau_limit", "double", nq, "|tau| <= this at this step (run-time torque limits within the compiled ones)"),
+        ("ramp_step", "int", 0, "steps taken along the ramp"),
         ("refactor", "int", 3, "a DAQP state's H or A changed since it factored them"),
         ("daqp_real", "double", max(daqp_doubles, 1), "DAQP's arrays (factorizations, working sets) of every state: no heap"),
         ("daqp_int", "int", max(daqp_ints, 1), ""),

@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from ..controller import STATUS_INVALID_OUTPUT, STATUS_LIMITS_RELAXED, StepResult
+from ..formulations.parameters import ParameterError, ParameterLayout
 from ..tasks import ReferenceInput
 from .bundle import CodegenError
 from .layout import info_struct, workspace_fields, workspace_struct
@@ -57,8 +58,10 @@ class CompiledController:
         levels = len(self.priorities)
         self.bound_names: list[str] = list(m["bound_names"])
         self._Info = info_struct(self.n, levels, self.nx, len(self.bound_names))
+        self.param_layout = ParameterLayout.from_dict(m.get("param_layout"), self.n)
+        self.param_size = self.param_layout.size
         fields = workspace_fields(self.n, self.ref_size, self.nx, self.na, levels, m["casadi_work"],
-                                  len(self.bound_names), m["least_squares_rows"])
+                                  len(self.bound_names), m["least_squares_rows"], self.param_size)
         workspace = workspace_struct(fields, m["solver_storage_bytes"])
         self.workspace_bytes = int(self._lib_fn("workspace_size")())
         if self.workspace_bytes != ctypes.sizeof(workspace) or self._lib_fn("info_size")() != ctypes.sizeof(self._Info):
@@ -112,6 +115,13 @@ class CompiledController:
         self._lib_fn("info_size").restype = ctypes.c_size_t
         self._status_name = self._lib_fn("status_name")
         self._status_name.argtypes, self._status_name.restype = [ctypes.c_int], ctypes.c_char_p
+        self._set_params = self._lib_fn("set_params")
+        self._set_params.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.POINTER(ctypes.c_int)]
+        self._set_params.restype = ctypes.c_int
+        self._get_params = self._lib_fn("get_params")
+        self._get_params.argtypes, self._get_params.restype = [ctypes.c_void_p, ctypes.c_void_p], ctypes.c_int
+        self._param_name = self._lib_fn("param_name")
+        self._param_name.argtypes, self._param_name.restype = [ctypes.c_int], ctypes.c_char_p
 
     # -- same surface as Controller --------------------------------------------------------------
 
@@ -121,6 +131,40 @@ class CompiledController:
             ReferenceInput(r["task"], r["field"], r["offset"], r["size"], r["unit"], tuple(r["components"]))
             for r in self.manifest["ref_layout"]
         ]
+
+    # -- run-time parameters (the C functions do the checking and the ramp) ------------------------
+
+    def set_params(self, values: dict | np.ndarray) -> None:
+        """As `Controller.set_params`: {name: value(s)} over the current set, or a whole vector;
+        <name>_set_params checks it and either takes it (ramped) or keeps the old set, and a
+        ParameterError names the field it refused."""
+        vector = self.param_layout.vector(values, self._params_target())
+        buffer = np.zeros(max(self.param_size, 1))
+        buffer[: self.param_size] = vector
+        field = ctypes.c_int(-1)
+        status = self._set_params(self._ws, ctypes.c_void_p(buffer.ctypes.data), ctypes.byref(field))
+        if status == 0:
+            return
+        name = self._param_name(field.value).decode()
+        try:
+            self.param_layout.check(vector)  # the reason, in words
+        except ParameterError as error:
+            if error.field == name:
+                raise
+        raise ParameterError(name, f"refused by {self.name}_set_params (status {status})")
+
+    def params(self) -> dict[str, list[float]]:
+        """The parameter set last taken, by name (read back from the workspace)."""
+        return self.param_layout.as_dict(self._params_target())
+
+    def params_default(self) -> dict[str, list[float]]:
+        return self.param_layout.as_dict(self.param_layout.defaults)
+
+    def _params_target(self) -> np.ndarray:
+        buffer = np.zeros(max(self.param_size, 1))
+        if self._get_params(self._ws, ctypes.c_void_p(buffer.ctypes.data)) != 0:
+            raise RuntimeError("the controller was closed")
+        return buffer[: self.param_size].copy()
 
     def status_name(self, status: int) -> str:
         return self._status_name(status).decode()

@@ -29,6 +29,7 @@ class State:
     tau_ext: np.ndarray
     ref: np.ndarray
     kind: str = "random"
+    params: np.ndarray | None = None  # a run-time parameter set taken just before this state's step
 
     def as_tuple(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         return self.q, self.dq, self.tau_ext, self.ref
@@ -123,6 +124,31 @@ class StateSampler:
         tau_ext = self.rng.uniform(0.3, 0.8, self.n) * self.tau_max * self.rng.choice([-1.0, 1.0], self.n)
         return State(q, self.random_dq(), tau_ext, self.reference(q), "heavy_load")
 
+    def parameters(self) -> np.ndarray:
+        """A valid run-time parameter set away from the compiled one: gains ×0.6–1.4, references
+        moved by a few cm or hundredths of a rad, activations 0 or 0.5, every limit narrowed."""
+        layout = self.controller.param_layout
+        values = layout.defaults
+        for e in layout.entries:
+            kind = e.name.rsplit(".", 1)[-1]
+            for k in range(e.size):
+                d, lo, hi = e.default[k], e.lower[k], e.upper[k]
+                if kind == "min":
+                    v = d + self.rng.uniform(0.0, 0.2) * min(hi - d, 0.5)
+                elif kind == "max" and e.lower_open:  # a magnitude: |dq|, |ddq|, |tau| ≤ it
+                    v = d * self.rng.uniform(0.7, 1.0)
+                elif kind == "max":
+                    v = d - self.rng.uniform(0.0, 0.2) * min(d - lo, 0.5)
+                elif kind == "activation":
+                    v = float(self.rng.choice([0.0, 0.5]))
+                elif kind in ("kp", "kd", "max_velocity"):
+                    v = d * self.rng.uniform(0.6, 1.4)
+                else:  # a reference
+                    v = d + self.rng.normal(0.0, 0.03)
+                values[e.offset + k] = np.clip(v, lo, hi)
+        layout.check(values)
+        return values
+
     def mixed(self, count: int, limit_fraction: float = 0.15) -> list[State]:
         """Mostly random states, a share of them with limits in play."""
         out = []
@@ -168,6 +194,12 @@ def golden_states(controller: Controller, count: int = 120, seed: int = 0) -> li
     for i, position in enumerate((0, 25, 60, 95)):
         base = states[min(position, len(states) - 1)]
         states.insert(position, sampler.nonfinite(base, i))
+    if controller.param_size:
+        # run-time parameter sets taken along the way (each ramped in over the next steps, one of
+        # them across a non-finite input), and the compiled set again near the end
+        for position in (20, 45, 58, 80):
+            states[min(position, len(states) - 1)].params = sampler.parameters()
+        states[min(105, len(states) - 1)].params = controller.param_layout.defaults
     return states
 
 

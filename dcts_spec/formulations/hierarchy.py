@@ -39,6 +39,9 @@ RANK_SAMPLES = 12
 # Least-squares levels: the acceleration energy only breaks ties (weight relative to the task).
 LEAST_SQUARES_ENERGY_RATIO = 1e-10
 NULL_SPACE_REGULARIZATION = 1.0
+# A least-squares level whose tasks are all switched off (activation 0) minimizes the acceleration
+# energy with this weight (its task rows weigh ~1 per unit of acceleration when on).
+RELEASED_ENERGY_WEIGHT = 1.0
 
 
 def damped_inverse(a: ca.SX) -> ca.SX:
@@ -108,7 +111,8 @@ def _activated(activation: ca.SX, J: ca.SX, bias: ca.SX, command: Affine, Jr: ca
 
 def least_squares_objective(level: Level, acceleration: Affine, mass: ca.SX) -> tuple[ca.SX, ca.SX]:
     """Hessian and gradient in x of  ½‖J a(x) + J̇q̇ − ẍ_d‖² + ½ε‖a(x) − a(0)‖²_M  (a(x) affine),
-    each row's square weighted by its run-time activation if it has one.
+    each row's square weighted by its run-time activation if it has one (and the energy weighted
+    up as the most active row fades out).
 
     Over the freedom a(x) leaves, the minimizer is the closed-form step with a pseudo-inverse,
     a + J̄⁺(ẍ_d − J̇q̇ − J a), also where J restricted to that freedom has lost rank: the task is
@@ -117,11 +121,19 @@ def least_squares_objective(level: Level, acceleration: Affine, mass: ca.SX) -> 
     """
     G = ca.mtimes(level.jacobian, acceleration.matrix)
     residual = ca.mtimes(level.jacobian, acceleration.offset) + level.bias - level.target
-    if level.activation is not None:  # each row's square weighted by its activation
+    energy_weight = LEAST_SQUARES_ENERGY_RATIO
+    if level.activation is not None:
+        # each row's square weighted by its activation; as the last active row fades out, the
+        # acceleration energy takes over (with nothing left to fit, the level's freedom moves at
+        # minimum energy, as below a level that is met exactly, and the QP stays well posed)
         root = ca.sqrt(level.activation)
         G, residual = ca.mtimes(ca.diag(root), G), root * residual
+        strongest = level.activation[0]
+        for j in range(1, level.dim):
+            strongest = ca.fmax(strongest, level.activation[j])
+        energy_weight = energy_weight + (1.0 - strongest) * RELEASED_ENERGY_WEIGHT
     energy = ca.mtimes([acceleration.matrix.T, mass, acceleration.matrix])
-    return ca.mtimes(G.T, G) + LEAST_SQUARES_ENERGY_RATIO * energy, ca.mtimes(G.T, residual)
+    return ca.mtimes(G.T, G) + energy_weight * energy, ca.mtimes(G.T, residual)
 
 
 def least_squares_step(level: Level, acceleration: ca.SX, N: ca.SX, mass: ca.SX) -> ca.SX:

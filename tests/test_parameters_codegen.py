@@ -1,0 +1,87 @@
+"""Run-time parameters in the C bundle: the same API as the Python runtime, the whole set checked
+in C, the same ramp, golden vectors with non-default sets, and the header's table."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import yaml
+
+from dcts_spec.codegen import compile_c
+from dcts_spec.controller import build_controller
+from dcts_spec.formulations.parameters import ParameterError
+
+from test_parameters import ALL, DQ, Q, SPEC
+
+
+@pytest.fixture(autouse=True)
+def _private_bundle_cache(tmp_path_factory, monkeypatch):
+    monkeypatch.setenv("DCTS_CACHE_DIR", str(tmp_path_factory.getbasetemp() / "bundle-cache"))
+
+
+@pytest.fixture(scope="module", params=["dcts", "osc"])
+def pair(request, tmp_path_factory):
+    """The spec with every kind of parameter compiled and built, and its Python runtime."""
+    folder = tmp_path_factory.mktemp(f"params_{request.param}")
+    data = dict(SPEC, parameters=ALL, controller={"formulation": request.param})
+    (folder / "params.yaml").write_text(yaml.safe_dump(data))
+    compiled = compile_c(folder / "params.yaml", folder / "bundle")
+    yield folder / "bundle", compiled, build_controller(folder / "params.yaml")
+    compiled.close()
+
+
+def test_golden_vectors_take_non_default_sets(pair):
+    bundle, _, _ = pair
+    manifest = json.loads((bundle / "manifest.json").read_text())
+    assert manifest["built"] and manifest["nparam"] == 62
+    vectors = json.loads((bundle / "golden.json").read_text())["vectors"]
+    sets = [v["params"] for v in vectors if "params" in v]
+    defaults = [v for e in manifest["param_layout"]["entries"] for v in e["default"]]
+    assert len(sets) == 5 and sum(s != defaults for s in sets) == 4
+
+
+def test_c_and_python_ramp_the_same_through_a_mode_switch(pair):
+    _, c, python = pair
+    for runtime in (c, python):
+        runtime.set_params(runtime.params_default())
+    taus = {id(c): [], id(python): []}
+    for k in range(40):
+        if k == 5:
+            for runtime in (c, python):
+                runtime.set_params({"tool.kp": 300, "tool.activation": 0.0, "joint_torque.max": 80})
+        if k == 7:  # mid-ramp: a new set starts from where the ramp is
+            for runtime in (c, python):
+                runtime.set_params({"tool.activation": 1.0})
+        q = Q + 0.01 * k
+        for runtime in (c, python):
+            taus[id(runtime)].append(runtime.step(q, DQ).tau)
+    np.testing.assert_allclose(taus[id(c)], taus[id(python)], rtol=1e-6, atol=1e-6)
+    assert np.abs(np.array(taus[id(c)][12:])).max() <= 80 + 1e-9
+
+
+@pytest.mark.parametrize(("values", "field"), [
+    ({"tool.kd": np.nan}, "tool.kd"),
+    ({"posture.kp": -1}, "posture.kp"),
+    ({"joint_velocity.max": 10}, "joint_velocity.max"),
+    ({"cartesian.tool.z.min": 0.05}, "cartesian.tool.z.min"),
+    ({"joint_position.min": 0.3, "joint_position.max": 0.2}, "joint_position.max"),
+])
+def test_c_refuses_an_invalid_set_names_the_field_and_keeps_the_old_one(pair, values, field):
+    _, c, _ = pair
+    c.set_params({"tool.kp": 42})
+    kept = c.params()
+    with pytest.raises(ParameterError) as info:
+        c.set_params(values)
+    assert info.value.field == field
+    assert c.params() == kept
+
+
+def test_the_header_lists_the_parameters(pair):
+    bundle, _, python = pair
+    header = (bundle / "params.h").read_text()
+    assert "int params_set_params(params_workspace *ws, const params_params *p, int *field);" in header
+    for entry in python.param_layout.entries:
+        assert f"{entry.c_name}" in header and f"#define PARAMS_PARAM_{entry.c_name.upper()} " in header
+    assert "#define PARAMS_RAMP_STEPS 5" in header
