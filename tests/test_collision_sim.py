@@ -73,3 +73,14 @@ def test_mujoco_measures_the_same_distances(case) -> None:
             else:
                 assert theirs <= max(d[k], 0.0) + 2e-5
     assert compared > 10 * len(model.pairs)
+
+
+def test_a_pair_reads_as_its_bound_in_the_run_summary(case) -> None:
+    """A crossed distance row is named in words in summary.json's relaxed_bounds, as the joint and
+    Cartesian bounds are (limits/naming.row_text)."""
+    from dcts_spec.limits.naming import row_text
+
+    robot, model, _ = case
+    pair = model.pairs[0]
+    assert row_text(robot, pair.name, model) == f"distance({pair.a.name}, {pair.b.name}) ≥ {pair.min_distance:.4g} m"
+    assert row_text(robot, pair.name) == pair.name  # without the collision model: the row's name

@@ -70,7 +70,8 @@ SUMMARY_KEYS = (
 )
 
 
-def summarize(log: SimulationLog, series: TimeSeries, robot: Robot, priorities: list[int]) -> dict[str, Any]:
+def summarize(log: SimulationLog, series: TimeSeries, robot: Robot, priorities: list[int],
+              collision: CollisionModel | None = None) -> dict[str, Any]:
     """The summary.json metrics of a run (see the module docstring for the definitions)."""
     lim = robot.limits
     velocity_excess = _excess(np.abs(log.dq), lim.v_max)
@@ -89,7 +90,7 @@ def summarize(log: SimulationLog, series: TimeSeries, robot: Robot, priorities: 
         "max_cartesian_violation": _cartesian_violation(series, robot),
         "solver_failures": int(np.count_nonzero(log.status < 0)),
         "limits_relaxed": int(np.count_nonzero(log.status == STATUS_LIMITS_RELAXED)),
-        "relaxed_bounds": _relaxed_bounds(log, robot),
+        "relaxed_bounds": _relaxed_bounds(log, robot, collision),
         "min_scaling": _peak(log.scaling, np.min, default=1.0),
         "min_scaling_at": _min_scaling_at(log, series, priorities),
         "task_error_quantity": {t: "damping (velocity error)" if t in series.damping else "tracking error"
@@ -149,13 +150,13 @@ def _min_scaling_at(log: SimulationLog, series: TimeSeries, priorities: list[int
     return {"priority": priority, "tasks": list(series.level_tasks.get(priority, ())), "time": float(log.time[k])}
 
 
-def _relaxed_bounds(log: SimulationLog, robot: Robot) -> dict[str, dict[str, Any]]:
+def _relaxed_bounds(log: SimulationLog, robot: Robot, collision: CollisionModel | None) -> dict[str, dict[str, Any]]:
     """Each bound that gave way: the bound as text, how many steps, the first and last time (s)."""
     out = {}
     for j, name in enumerate(log.bound_names):
         steps = np.flatnonzero(log.relaxed[:, j])
         if steps.size:
-            out[name] = {"bound": row_text(robot, name), "steps": int(steps.size),
+            out[name] = {"bound": row_text(robot, name, collision), "steps": int(steps.size),
                          "first": float(log.time[steps[0]]), "last": float(log.time[steps[-1]])}
     return out
 

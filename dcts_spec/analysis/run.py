@@ -66,9 +66,9 @@ def analyze(sim: Simulation, log: SimulationLog, label: str | None = None) -> Ru
         "integrator": sim.scenario.integrator,
         "external_torque_sensing": sim.scenario.sensing.mode,
         "mass_scale": sim.scenario.mass_scale,
-        **summarize(log, series, robot, priorities),
     }
     collision = resolve_collision(spec, robot)[0]
+    summary |= summarize(log, series, robot, priorities, collision)
     distances = pair_distances(collision, robot, log.q)
     summary |= collision_metrics(collision, distances, log.time)
     summary["units"] = summary_units(summary, series, robot)

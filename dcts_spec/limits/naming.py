@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..robot.collision import CollisionModel
 from ..robot.model import CartesianBound, Robot
 
 
@@ -50,12 +51,16 @@ def cartesian_row_name(b: CartesianBound) -> str:
     return f"cartesian:{b.frame}.{b.label}"
 
 
-def row_text(robot: Robot, row_name: str) -> str:
-    """The bound behind a row name, as text; the name itself for a row this robot does not have."""
+def row_text(robot: Robot, row_name: str, collision: CollisionModel | None = None) -> str:
+    """The bound behind a row name, as text; the name itself for a row this robot (or its
+    collision model) does not have."""
     for j, joint in enumerate(robot.joint_names):
         if joint_row_name(joint) == row_name:
             return joint_bound_text(robot, j)
     for b in robot.cartesian_bounds:
         if cartesian_row_name(b) == row_name:
             return bound_text(b)
+    for pair in collision.pairs if collision is not None else ():
+        if pair.name == row_name:
+            return f"distance({pair.a.name}, {pair.b.name}) ≥ {pair.min_distance:.4g} m"
     return row_name
