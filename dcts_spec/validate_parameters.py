@@ -4,9 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 
+from .formulations.parameters import ParameterError, build_parameters
 from .robot.model import Robot
 from .spec import Diagnostic, Spec
 from .spec.errors import did_you_mean
+from .tasks import make_task
 
 
 def check_parameters(spec: Spec, robot: Robot) -> list[Diagnostic]:
@@ -14,7 +16,7 @@ def check_parameters(spec: Spec, robot: Robot) -> list[Diagnostic]:
     finite compiled limit to narrow; nothing is named twice."""
     settings, src, diags = spec.parameters, spec.source, []
     if settings is None:
-        return diags
+        return _check_schedule(spec, robot)
     tasks = {t.name: t for t in spec.tasks}
     for name, fields in settings.tasks.items():
         at = ("parameters", "tasks", name)
@@ -49,4 +51,28 @@ def check_parameters(spec: Spec, robot: Robot) -> list[Diagnostic]:
             source = "limits.cartesian" if group == "cartesian" else f"limits.{group}"
             diags.append(src.diagnostic(where, f"the compiled controller has no {group.replace('_', ' ')} limit to "
                                                f"narrow at run time; give one in {source} (it becomes the envelope)"))
+    return diags or _check_schedule(spec, robot)
+
+
+def _check_schedule(spec: Spec, robot: Robot) -> list[Diagnostic]:
+    """Each of the scenario's parameter changes, applied in time order over the set before it,
+    names parameters of the controller and gives a valid set."""
+    changes = [] if spec.scenario is None else spec.scenario.parameters
+    if not changes:
+        return []
+    try:
+        tasks = [make_task(t, robot) for t in spec.tasks]
+    except ValueError:  # (a task that does not resolve: reported by the task checks)
+        return []
+    layout = build_parameters(spec, robot, tasks).layout
+    values, diags = layout.defaults, []
+    for i in sorted(range(len(changes)), key=lambda i: changes[i].time):
+        try:
+            values = layout.vector(dict(changes[i].values), values)
+            layout.check(values)
+        except ParameterError as error:
+            at = ("scenario", "parameters", i, "values")
+            key = at + (error.field,) if error.field in changes[i].values else at
+            diags.append(spec.source.diagnostic(key, str(error)))
+            break
     return diags

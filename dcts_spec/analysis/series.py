@@ -74,12 +74,14 @@ def evaluate(spec: Spec, robot: Robot, log: SimulationLog) -> TimeSeries:
         "g": problem.gravity,
         "J": ca.reshape(jacobian, jacobian.numel(), 1),
     }
-    function = ca.Function("series", [problem.q, problem.dq, problem.ref, a], list(outputs.values()))
+    function = ca.Function("series", [problem.q, problem.dq, problem.ref, problem.param, a], list(outputs.values()))
     if samples == 0:
         values = [np.zeros((samples, int(v.numel()))) for v in outputs.values()]
     else:
         mapped = function.map(samples, "thread", 2)
-        values = [np.array(v).T for v in mapped(log.q.T, log.dq.T, log.ref.T, log.ddq.T)]
+        param = log.param if log.param.shape == (samples, problem.param.shape[0]) else np.tile(
+            problem.param_layout.defaults, (samples, 1))  # (a log from before run-time parameters)
+        values = [np.array(v).T for v in mapped(log.q.T, log.dq.T, log.ref.T, param.T, log.ddq.T)]
     out = dict(zip(outputs, values, strict=True))
 
     # CasADi reshapes column-major: the flat vector holds the columns one after the other.

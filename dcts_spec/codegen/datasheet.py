@@ -286,8 +286,8 @@ def parameters_doc_text(controller: Controller, name: str) -> str:
     lines.append(columns(rows))
     if any(e.name.endswith(".activation") for e in layout.entries):
         lines += wrap("activation: 1 = the task as compiled; 0 = as if it were not in the spec (it neither moves "
-                      "the robot nor takes directions from the levels below); in between a damped least-squares "
-                      "task that gets about that fraction of its acceleration.")
+                      "the robot nor takes directions from the levels below); in between the task applies that "
+                      "fraction of its correction and leaves the rest of its directions to the levels below.")
     return "\n".join(lines)
 
 

@@ -69,6 +69,14 @@ def recursive_hierarchy(
 
     The metric M⁻¹, the free acceleration a₀ and N₀ = I can be replaced (the projector baseline
     locks joints: it passes the metric and a₀ of the locked robot, and N₀ = its free joints).
+
+    A level whose rows have run-time activations a ∈ [0, 1] applies the fraction a of each row's
+    correction, J̄ diag(a) (v − J̇q̇ − J a), and takes the same fraction of its directions from the
+    levels below, N − J̄ diag(a) J N. At a = 1 this is the level itself (exact); at a = 0 the row
+    has no effect at all: it neither moves the robot nor takes any direction from the levels below,
+    as if the task were not in the spec. In between the torque moves smoothly (the level's own
+    share linearly), so a ramped activation switches a task on or off without a jump; the levels
+    below then see a blend of the projectors and may leak into a half-active task's directions.
     """
     n = problem.n
     Minv = problem.mass_matrix_inverse if metric_inverse is None else metric_inverse
@@ -76,37 +84,16 @@ def recursive_hierarchy(
     matrix = ca.SX(n, nx)
     N = ca.SX.eye(n) if projector is None else projector
     for level, v in zip(problem.levels, commands):
-        J, bias, command = level.jacobian, level.bias, v
+        J = level.jacobian
         Jr = ca.mtimes(J, N)
         Minv_JrT = ca.mtimes(Minv, Jr.T)
-        inner = ca.mtimes(Jr, Minv_JrT)
+        Jbar = ca.mtimes(Minv_JrT, damped_inverse(ca.mtimes(Jr, Minv_JrT)))
         if level.activation is not None:
-            J, bias, command, Jr, Minv_JrT, inner = _activated(level.activation, J, bias, command, Jr, Minv_JrT, inner)
-        Jbar = ca.mtimes(Minv_JrT, damped_inverse(inner))
-        offset = offset + ca.mtimes(Jbar, command.offset - bias - ca.mtimes(J, offset))
-        matrix = matrix + ca.mtimes(Jbar, command.matrix - ca.mtimes(J, matrix))
+            Jbar = ca.mtimes(Jbar, ca.diag(level.activation))
+        offset = offset + ca.mtimes(Jbar, v.offset - level.bias - ca.mtimes(J, offset))
+        matrix = matrix + ca.mtimes(Jbar, v.matrix - ca.mtimes(J, matrix))
         N = N - ca.mtimes(Jbar, Jr)
     return Affine(offset, matrix), N
-
-
-def _activated(activation: ca.SX, J: ca.SX, bias: ca.SX, command: Affine, Jr: ca.SX, Minv_JrT: ca.SX, inner: ca.SX):
-    """A level whose rows have run-time activations a ∈ [0, 1]: each row is weighted by √a and
-    (1 − a) times the level's mean eigenvalue is added to its diagonal of J M⁻¹ Jᵀ.
-
-    At a = 1 this is the level itself (exact); at a = 0 the row has no effect at all: it neither
-    moves the robot nor takes any direction from the levels below (N is left unchanged), as if the
-    task were not in the spec. In between the row is a damped least-squares task: where its
-    J M⁻¹ Jᵀ is isotropic it gets the fraction a of the acceleration it asks for, and it releases
-    its directions to the levels below gradually, so a ramped activation switches a task on or off
-    without a torque jump. (Scaling the rows alone would change nothing: a strict level meets
-    √a J a = √a v exactly for any a > 0.)
-    """
-    root = ca.sqrt(activation)
-    mean = ca.trace(inner) / inner.shape[0]
-    rows = ca.diag(root)
-    inner = ca.mtimes([rows, inner, rows]) + ca.diag((1.0 - activation) * mean)
-    return (ca.mtimes(rows, J), root * bias, Affine(root * command.offset, ca.mtimes(rows, command.matrix)),
-            ca.mtimes(rows, Jr), ca.mtimes(Minv_JrT, rows), inner)
 
 
 def least_squares_objective(level: Level, acceleration: Affine, mass: ca.SX) -> tuple[ca.SX, ca.SX]:

@@ -30,13 +30,15 @@ class SimulationLog:
     status: np.ndarray
     relaxed: np.ndarray  # (steps, bounds): the joint/Cartesian bounds crossed (status 1)
     bound_names: list[str] = field(default_factory=list)  # the columns of `relaxed`
+    # (steps, run-time parameters): the values the controller applied at each step (ramps included)
+    param: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
     waypoint_times: np.ndarray = field(default_factory=lambda: np.zeros(0))  # NaN where not reached
     wall_time: float = 0.0  # s spent in the simulation loop (controller, physics, logging; not hooks)
     diverged_at: float | None = None  # when MuJoCo rejected the state or the torque: the run stopped
 
     @classmethod
     def allocate(cls, steps: int, n: int, ref_size: int, levels: int, period: float,
-                 bound_names: list[str] = ()) -> SimulationLog:
+                 bound_names: list[str] = (), param_size: int = 0) -> SimulationLog:
         def zeros(*shape: int) -> np.ndarray:
             return np.zeros((steps, *shape))
 
@@ -47,6 +49,7 @@ class SimulationLog:
             tau_ext_true=zeros(n), tau_ext_measured=zeros(n), ref=zeros(ref_size), scaling=zeros(levels),
             status=np.zeros(steps, dtype=np.int8),
             relaxed=np.zeros((steps, len(bound_names)), dtype=bool), bound_names=list(bound_names),
+            param=zeros(param_size),
         )
 
     @property

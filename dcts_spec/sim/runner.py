@@ -12,6 +12,8 @@ import mujoco
 import numpy as np
 
 from ..controller import STATUS_LIMITS_RELAXED
+from ..formulations.parameters import ParameterLayout
+from ..parameter_ramp import ParameterRamp, ramp_steps
 from ..robot.collision import resolve_collision
 from ..robot.model import Robot
 from ..spec import Spec
@@ -62,6 +64,11 @@ class Simulation:
             task = next(t for t in self.tasks if t.name == scenario.waypoints.task)
             self.waypoints = WaypointFollower(scenario.waypoints, task, runtime.ref_layout, robot)
 
+    @property
+    def param_layout(self) -> ParameterLayout:
+        """The runtime's run-time parameters (none for a runtime without them)."""
+        return getattr(self.runtime, "param_layout", None) or ParameterLayout()
+
     def reset(self) -> None:
         """MuJoCo at the scenario's initial state."""
         mujoco.mj_resetData(self.mj_model, self.mj_data)
@@ -76,10 +83,19 @@ class Simulation:
         n = self.robot.nv
         levels = len(self.runtime.priorities)
         bound_names = list(getattr(self.runtime, "bound_names", []))
-        log = SimulationLog.allocate(steps, n, self.initial_ref.size, levels, period, bound_names)
+        log = SimulationLog.allocate(steps, n, self.initial_ref.size, levels, period, bound_names,
+                                     self.param_layout.size)
         disturbances = Disturbances(sc, self.robot.model, m)
         sensor = TorqueSensor(sc.sensing, self.controller_robot.model, steps)
         follower = self.waypoints
+        # Run-time parameter changes, given to the runtime at their time; `ramp` replays the ramp
+        # both runtimes apply, for the log (parameter_ramp.py)
+        changes = sorted(sc.parameter_changes, key=lambda c: c.time)
+        layout = self.param_layout
+        ramp = ParameterRamp(layout.defaults, ramp_steps(layout.ramp_time, period))
+        if changes:
+            self.runtime.set_params(layout.defaults)
+        params = log.param
         ref = self.initial_ref.copy()
         if follower is not None:
             follower.restart(ref)
@@ -107,6 +123,11 @@ class Simulation:
                     np.subtract(dq[k], dq[k - 1], out=ddq[k - 1])
                     ddq[k - 1] /= period
                 sensor.measure(k, q[k - 1], dq[k - 1], ddq[k - 1], tau[k - 1], tau_meas[k])
+                while changes and times[k] >= changes[0].time - 1e-9 * period:
+                    values = layout.vector(dict(changes.pop(0).values), ramp.target)
+                    self.runtime.set_params(values)
+                    ramp.set(values)
+                params[k] = ramp.advance()
                 if follower is not None:
                     follower.update(times[k], q[k], ref)
                 refs[k] = ref

@@ -11,6 +11,7 @@ from ..choices import RUNTIMES
 from ..controller import Controller, StepResult
 from ..robot.model import Robot
 from ..spec import Spec
+from ..formulations.parameters import ParameterLayout
 from ..tasks import ReferenceInput
 
 if TYPE_CHECKING:
@@ -22,7 +23,8 @@ class Runtime(Protocol):
 
     A runtime may also have `step_into(q, dq, tau_ext, ref, tau, ddq, scaling) -> status`
     (the C runtime does), which writes its outputs into the given arrays; the simulation then
-    uses it instead of `step`.
+    uses it instead of `step`. `param_layout` and `set_params` are needed only by a scenario
+    that schedules run-time parameters.
     """
 
     @property
@@ -33,6 +35,11 @@ class Runtime(Protocol):
 
     @property
     def priorities(self) -> list[int]: ...
+
+    @property
+    def param_layout(self) -> ParameterLayout: ...
+
+    def set_params(self, values: dict | np.ndarray) -> None: ...
 
     def step(self, q: np.ndarray, dq: np.ndarray, tau_ext: np.ndarray | None = None,
              ref: np.ndarray | None = None) -> StepResult: ...

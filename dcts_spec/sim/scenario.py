@@ -9,7 +9,7 @@ import numpy as np
 
 from ..robot.model import Robot
 from ..spec import Spec, SpecError
-from ..spec.scenario import ExternalTorqueSensing, Waypoints
+from ..spec.scenario import ExternalTorqueSensing, ParameterChange, Waypoints
 from ..spec.units import to_si
 from ..validate import initial_configuration
 from .mujoco_model import Payload
@@ -61,6 +61,7 @@ class Scenario:
     waypoints: Waypoints | None
     sensing: ExternalTorqueSensing
     mass_scale: float
+    parameter_changes: tuple[ParameterChange, ...] = ()  # run-time parameter sets given during the run
 
     @property
     def steps(self) -> int:
@@ -106,4 +107,5 @@ def resolve_scenario(spec: Spec, robot: Robot) -> Scenario:
         waypoints=sc.waypoints,
         sensing=sc.sensing,
         mass_scale=1.0 if sc.model_mismatch is None else float(sc.model_mismatch.mass_scale),
+        parameter_changes=tuple(sc.parameters),
     )

@@ -78,6 +78,16 @@ class ModelMismatch(StrictModel):
                                "factor (unitless)", examples=[1.1])
 
 
+class ParameterChange(StrictModel):
+    """Run-time parameters given to the controller at a time of the run (ramped in from there)."""
+
+    time: Annotated[Number, TIME] = Field(description="when, s after the start of the run", examples=[1.0])
+    values: dict[str, ScalarOrVector] = Field(
+        min_length=1, description="parameter (as the bundle's header names it: tool.kp, tool.activation, "
+        "joint_torque.max, ...) to its value, or one value per component; SI units (rad, not deg)",
+        examples=[{"tool_position.kp": 400, "tool_position.activation": 0}])
+
+
 class ScenarioSpec(StrictModel):
     """A simulated run: its length, start, disturbances, payloads, waypoints and sensing."""
 
@@ -100,6 +110,9 @@ class ScenarioSpec(StrictModel):
         "settings of the noisy sensor", examples=["ignored", {"mode": "noisy", "noise_std": 0.5}])
     model_mismatch: ModelMismatch | None = Field(None, description="differences between the simulated robot and the "
                                                  "controller's model", examples=[{"mass_scale": 1.1}])
+    parameters: list[ParameterChange] = Field(
+        default_factory=list, description="run-time parameter changes (the spec's `parameters` section), each "
+        "over the set before it", examples=[[{"time": 1.0, "values": {"tool_position.activation": 0}}]])
     substeps: Annotated[Integer, Range(1, 1000)] = Field(1, description="simulation steps per control period (the step is period/substeps, "
                               "s)", examples=[1, 4])
     integrator: Literal["euler", "implicitfast", "implicit", "rk4"] = Field(
