@@ -7,6 +7,7 @@ import casadi as ca
 from ..robot.model import CartesianBound
 from ..symbolic import SymbolicRobot
 from .base import AccelerationRows
+from .naming import cartesian_row_name
 from .viability import acceleration_bounds, state_excess
 
 
@@ -23,6 +24,6 @@ def cartesian_rows(bounds: tuple[CartesianBound, ...], robot: SymbolicRobot, dt:
         bias = ca.dot(d, robot.frame_bias_acceleration(b.frame)[0:3])
         c, c_dot = ca.dot(d, position), ca.mtimes(jacobian, robot.dq)
         lo, hi = acceleration_bounds(c, c_dot, c_min, c_max, b.v_max, float("inf"), b.a_max, dt)
-        parts.append(AccelerationRows(jacobian, bias, lo, hi, [f"cartesian:{b.frame}.{b.label}"],
+        parts.append(AccelerationRows(jacobian, bias, lo, hi, [cartesian_row_name(b)],
                                       state_excess(c, c_dot, c_min, c_max, b.v_max)))
     return AccelerationRows.stack(parts, robot.nv)

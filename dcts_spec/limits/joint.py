@@ -7,6 +7,7 @@ import numpy as np
 
 from ..robot.model import JointLimits
 from .base import AccelerationRows
+from .naming import joint_row_name
 from .viability import acceleration_bounds, state_excess
 
 # Braking acceleration the viability bound assumes when the spec gives no joint acceleration limit.
@@ -34,7 +35,7 @@ def joint_rows(limits: JointLimits, q: ca.SX, dq: ca.SX, dt: float, names: list[
         lower.append(lo)
         upper.append(hi)
         excess.append(state_excess(q[j], dq[j], q_min[j], q_max[j], v_max[j]))
-        kept.append(f"joint:{names[j]}")
+        kept.append(joint_row_name(names[j]))
     if not kept:
         return AccelerationRows.stack([], n)
     return AccelerationRows(ca.vertcat(*rows), ca.SX.zeros(len(kept)), ca.vertcat(*lower), ca.vertcat(*upper), kept,
