@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from ..robot.collision import CollisionModel, resolve_collision
+from ..robot.collision import CollisionModel
 from ..robot.model import Robot
 from ..sim.log import SimulationLog
 from ..sim.runner import Simulation
@@ -67,7 +67,7 @@ def analyze(sim: Simulation, log: SimulationLog, label: str | None = None) -> Ru
         "external_torque_sensing": sim.scenario.sensing.mode,
         "mass_scale": sim.scenario.mass_scale,
     }
-    collision = resolve_collision(spec, robot)[0]
+    collision = sim.collision
     summary |= summarize(log, series, robot, priorities, collision)
     distances = pair_distances(collision, robot, log.q)
     summary |= collision_metrics(collision, distances, log.time)

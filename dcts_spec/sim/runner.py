@@ -53,9 +53,9 @@ class Simulation:
         self.runtime = runtime
         self.runtime_kind = runtime_kind
         self.formulation = formulation or spec.controller.formulation
+        self.collision = resolve_collision(spec, robot)[0]  # its shapes in MuJoCo; the analysis' pairs
         self.mj_model = build_mujoco_model(robot.model, timestep=scenario.timestep, integrator=scenario.integrator,
-                                           payloads=scenario.payloads, scenery=True,
-                                           collision=resolve_collision(spec, robot)[0])
+                                           payloads=scenario.payloads, scenery=True, collision=self.collision)
         self.mj_data = mujoco.MjData(self.mj_model)
         self.tasks = [make_task(t, robot) for t in spec.tasks]
         self.initial_ref = initial_references(self.tasks, runtime.ref_layout, robot, scenario.q0)
