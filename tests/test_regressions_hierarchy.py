@@ -450,3 +450,34 @@ def test_stretched_arm_toward_an_unreachable_target_is_solved():
     a = _accel(c, q, dq, r.tau)
     lo, hi = joint_acceleration_bounds(c.robot, q, dq, DT)
     assert np.all(a >= lo - 1e-6 * np.maximum(1, np.abs(lo))) and np.all(a <= hi + 1e-6 * np.maximum(1, np.abs(hi)))
+
+
+# -- 8. a state beyond a limit is never "ok" ------------------------------------------------------
+
+@pytest.mark.parametrize("robot", FALLBACK_ROBOTS)
+def test_status_ok_only_with_the_state_within_every_limit(robot):
+    """Random states of three robots, half of them with one joint pushed beyond its position or
+    velocity limit (by 1e-4 to 10 % of its range): status 0 only if every joint is within its
+    limits (checked against the robot's limits, not the QP data), and a joint beyond one is
+    always among the bounds the status names."""
+    c = _fallback_controller(robot)
+    lim = c.robot.limits
+    rng = np.random.default_rng(11)
+    beyond_seen = 0
+    for q, dq in _random_states(c, 60, seed=5):
+        j = int(rng.integers(c.n))
+        if rng.random() < 0.5:
+            if rng.random() < 0.5:
+                q[j] = lim.q_max[j] + rng.uniform(1e-4, 0.1) * (lim.q_max[j] - lim.q_min[j])
+            else:
+                dq[j] = -lim.v_max[j] * (1.0 + rng.uniform(1e-4, 0.1))
+        r = c.step(q, dq)
+        outside = np.flatnonzero((q > lim.q_max + 1e-5) | (q < lim.q_min - 1e-5) | (np.abs(dq) > lim.v_max + 1e-5))
+        assert r.status >= 0, r.status
+        if outside.size:
+            beyond_seen += 1
+            assert r.status == 1, (q, dq)
+            assert {f"joint:{c.robot.joint_names[k]}" for k in outside} <= set(r.relaxed), (outside, r.relaxed)
+        elif r.status == 0:
+            assert not r.relaxed
+    assert beyond_seen >= 15  # the case's premise
