@@ -158,6 +158,9 @@ CacheOption = Annotated[bool, typer.Option(
     "~/.cache/dcts/bundles); --no-cache builds it afresh and leaves the cache alone")]
 JsonOption = Annotated[bool, typer.Option("--json", help="machine-readable output")]
 QuietOption = Annotated[bool, typer.Option("--quiet", "-q", help="no progress messages on stderr")]
+BuildTimeoutOption = Annotated[Optional[float], typer.Option(
+    callback=_positive, metavar="SECONDS", help="time-out of each build step (make); on it the step's processes are "
+    "ended (default: $DCTS_BUILD_TIMEOUT, else 600)")]
 
 
 @command()
@@ -285,6 +288,7 @@ def compile_(
     qemu: Annotated[bool, typer.Option("--qemu/--no-qemu", help="cortex-m7: run the golden test on qemu")] = True,
     as_json: Annotated[bool, typer.Option("--json", help="print the bundle's manifest")] = False,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="no progress messages, no summary")] = False,
+    build_timeout: BuildTimeoutOption = None,
 ) -> None:
     """Generate the C bundle of a spec (QP data, DAQP solve, header, build files, golden test) and build it."""
     from .codegen import compile_bundle
@@ -294,7 +298,7 @@ def compile_(
         spec = load_spec(file)
         directory = out or output or Path("build") / spec.name
         report = compile_bundle(spec, directory, formulation=formulation, build=not no_build, target=target,
-                                daqp_src=daqp_src, qemu=qemu)
+                                daqp_src=daqp_src, qemu=qemu, build_timeout=build_timeout)
     if as_json:
         typer.echo(json.dumps(report.manifest, indent=2))
     elif not quiet:
@@ -309,6 +313,7 @@ def bench(
     states: Annotated[int, typer.Option(min=1, help="states timed in C (per state set)")] = 10000,
     python_states: Annotated[int, typer.Option(min=1, help="states timed in the Python runtime")] = 500,
     quiet: QuietOption = False,
+    build_timeout: BuildTimeoutOption = None,
 ) -> None:
     """Time the generated C step (data and solve), the Python runtime and Pinocchio's dynamics terms."""
     from .codegen.bench import bench as run_bench
@@ -317,7 +322,8 @@ def bench(
     with _exit_1_on_errors(), _feedback(quiet):
         phase(f"benchmarking {file}: build the bundle, then time {states} states in C (twice), {python_states} "
               "in Python, Pinocchio's terms and an instruction count")
-        result = run_bench(file, formulation=formulation, states=states, python_states=python_states)
+        result = run_bench(file, formulation=formulation, states=states, python_states=python_states,
+                           build_timeout=build_timeout)
     typer.echo(json.dumps(result, indent=2) if as_json else format_report(result))
 
 

@@ -31,7 +31,7 @@ def test_bench_announces_each_stage(monkeypatch: pytest.MonkeyPatch, tmp_path: P
     c_times = {"step": {"median_us": 1.0}}
     stand_ins = {
         "make_controller": lambda spec, formulation: controller,
-        "compile_bundle": lambda spec, directory, formulation: SimpleNamespace(manifest=manifest),
+        "compile_bundle": lambda spec, directory, formulation, build_timeout: SimpleNamespace(manifest=manifest),
         "load_bundle": lambda directory: contextlib.nullcontext(SimpleNamespace(step=None)),
         "trajectory_states": lambda controller, n, seed, step: [state] * n,
         "StateSampler": lambda controller, seed: SimpleNamespace(mixed=lambda n, limit_fraction: [state] * n),

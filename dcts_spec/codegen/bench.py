@@ -25,7 +25,8 @@ from ..controller import STATUS_NAMES
 from ..phases import phase
 from ..spec import load_spec
 from ..tasks.cartesian import CartesianTask
-from .build import CACHE_DIR, _tail, compile_bundle, make_controller, run, section_size
+from .build import CACHE_DIR, compile_bundle, make_controller, section_size
+from .process import run, tail
 from .bundle import CodegenError, render, template, version
 from .layout import casadi_work_lengths
 from .loader import load_bundle
@@ -164,7 +165,7 @@ def pinocchio_reference(controller, states: list[State], work: Path) -> dict:
             ns = np.frombuffer(out.read_bytes(), dtype=np.int64)
             return {"how": "C++ harness calling the pip-installed Pinocchio "
                            f"{pinocchio.__version__} (its precompiled algorithms)", "frames": frames, **_stats(ns)}
-        error = f"Pinocchio harness failed: {_tail(done.stderr, 3)}"
+        error = f"Pinocchio harness failed: {tail(done.stderr, 3)}"
     # Fallback: from Python (includes the binding overhead)
     data = model.createData()
     ids = [model.getFrameId(f) for f in frames]
@@ -218,8 +219,9 @@ def object_sizes(bundle: Path, manifest: dict, work: Path) -> dict:
 
 
 def bench(spec_file: str | Path, formulation: str | None = None, states: int = 10000, python_states: int = 500,
-          callgrind_states: int = 300, seed: int = 0) -> dict:
-    """Run the whole benchmark; returns a JSON-able dict (see `format_report`)."""
+          callgrind_states: int = 300, seed: int = 0, build_timeout: float | None = None) -> dict:
+    """Run the whole benchmark; returns a JSON-able dict (see `format_report`). `build_timeout`
+    bounds each build step, in s (see process.build_timeout)."""
     if states < 1:
         raise CodegenError("--states must be at least 1")
     if python_states < 1:
@@ -229,7 +231,7 @@ def bench(spec_file: str | Path, formulation: str | None = None, states: int = 1
     with tempfile.TemporaryDirectory(prefix="dcts-bench-") as tmp:
         work = Path(tmp)
         bundle = work / "bundle"
-        manifest = compile_bundle(spec, bundle, formulation=formulation).manifest
+        manifest = compile_bundle(spec, bundle, formulation=formulation, build_timeout=build_timeout).manifest
         t0 = time.perf_counter()
         phase(f"generating {states} closed-loop states (the C step in the loop)")
         with load_bundle(bundle) as compiled:

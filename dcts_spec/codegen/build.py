@@ -28,6 +28,7 @@ from ..robot.model import Robot
 from ..spec import Spec, load_spec
 from .bundle import DAQP_VERSION, GENERATOR, GOLDEN_COUNT, CodegenError, generate_sources
 from .model import model_record
+from .process import build_timeout as checked_timeout, run, tail
 
 CACHE_DIR = Path(os.environ.get("DCTS_CACHE", Path.home() / ".cache" / "dcts"))
 # What the golden-vector test prints (templates/test.c.in): its summary line and, built with
@@ -54,7 +55,7 @@ def daqp_sources(cache: Path | None = None, version: str = DAQP_VERSION) -> Path
                    f"daqp=={version}", "-d", str(cache)]
         done = subprocess.run(command, capture_output=True, text=True)
         if done.returncode != 0 or not archive.is_file():
-            raise CodegenError(f"could not download DAQP {version}'s sources with pip:\n{_tail(done.stdout + done.stderr)}")
+            raise CodegenError(f"could not download DAQP {version}'s sources with pip:\n{tail(done.stdout + done.stderr)}")
     with tarfile.open(archive) as tar:
         members = [m for m in tar.getmembers() if (m.name.startswith(f"daqp-{version}/csrc/") or m.name == f"daqp-{version}/LICENSE")
                    and (m.isfile() or m.isdir())]
@@ -64,26 +65,9 @@ def daqp_sources(cache: Path | None = None, version: str = DAQP_VERSION) -> Path
     return csrc
 
 
-def _tail(text: str, lines: int = 40) -> str:
-    return "\n".join(text.strip().splitlines()[-lines:])
-
-
-def run(command: list[str], cwd: Path, what: str, env: dict | None = None, timeout: float = 600) -> str:
-    """Run a build step; a failure raises CodegenError with the end of its output."""
-    try:
-        done = subprocess.run(command, cwd=cwd, capture_output=True, text=True, env=env, timeout=timeout)
-    except FileNotFoundError as exc:
-        raise CodegenError(f"{what}: {exc.filename} not found") from None
-    except subprocess.TimeoutExpired:
-        raise CodegenError(f"{what}: timed out after {timeout:.0f} s") from None
-    output = done.stdout + done.stderr
-    if done.returncode != 0:
-        raise CodegenError(f"{what} failed (exit code {done.returncode}):\n{_tail(output)}")
-    return output
-
-
 def make(directory: Path, targets: list[str], what: str, variables: dict[str, str] | None = None,
-         timeout: float = 600) -> str:
+         timeout: float | None = None) -> str:
+    """Run make in the bundle (`timeout`: see process.build_timeout)."""
     command = ["make", "-C", str(directory), f"-j{min(os.cpu_count() or 1, 8)}", *targets]
     command += [f"{k}={v}" for k, v in (variables or {}).items()]
     return run(command, directory, what, timeout=timeout)
@@ -278,7 +262,7 @@ def _keep_daqp_objects(directory: Path, build: str) -> None:
         shutil.rmtree(staging, ignore_errors=True)
 
 
-def build_host(directory: Path, manifest: dict, cc: str | None = None) -> dict:
+def build_host(directory: Path, manifest: dict, cc: str | None = None, timeout: float | None = None) -> dict:
     """Build the host library and the test with `make`, run the test, and again linked with a
     malloc that aborts (`make nomalloc`: neither init nor step may reach the heap)."""
     phase("compiling C and running the golden-vector test")
@@ -286,10 +270,10 @@ def build_host(directory: Path, manifest: dict, cc: str | None = None) -> dict:
     compiler = cc or os.environ.get("CC", "cc")
     build, _ = build_dirs(directory, variables)
     _reuse_daqp_objects(directory, build)
-    make(directory, ["all"], "host build", variables)
+    make(directory, ["all"], "host build", variables, timeout)
     _keep_daqp_objects(directory, build)
-    test = make(directory, ["check"], "golden-vector test", variables)
-    make(directory, ["nomalloc"], "golden-vector test with a malloc that aborts", variables)
+    test = make(directory, ["check"], "golden-vector test", variables, timeout)
+    make(directory, ["nomalloc"], "golden-vector test with a malloc that aborts", variables, timeout)
     lib = directory / manifest["library"]
     return {
         "compiler": compiler,
@@ -304,13 +288,13 @@ def build_host(directory: Path, manifest: dict, cc: str | None = None) -> dict:
     }
 
 
-def build_firmware(directory: Path, manifest: dict, qemu: bool = True) -> dict:
+def build_firmware(directory: Path, manifest: dict, qemu: bool = True, timeout: float | None = None) -> dict:
     """Cross-compile for Cortex-M7 (double FPU), report flash/RAM, run the golden test on qemu."""
     if shutil.which("arm-none-eabi-gcc") is None:
         raise CodegenError("arm-none-eabi-gcc not found: install gcc-arm-none-eabi and libnewlib-arm-none-eabi")
     phase("cross-compiling for cortex-m7")
     variables: dict[str, str] = {}
-    make(directory, ["firmware"], "firmware build", variables, timeout=1200)
+    make(directory, ["firmware"], "firmware build", variables, timeout)
     name = manifest["name"]
     sections = _arm_sections(directory / "firmware" / f"{name}_fw.size")
     text, data, bss = sections.get("text", 0), sections.get("data", 0), sections.get("bss", 0)
@@ -325,7 +309,7 @@ def build_firmware(directory: Path, manifest: dict, qemu: bool = True) -> dict:
         "stack_bytes": _stack_usage(directory / build_dirs(directory, variables)[1], name),
     }
     if qemu and shutil.which("qemu-system-arm"):
-        output = make(directory, ["qemu-check"], "golden-vector test on qemu (cortex-m7)", variables, timeout=1200)
+        output = make(directory, ["qemu-check"], "golden-vector test on qemu (cortex-m7)", variables, timeout)
         summary = _golden_summary(output)
         heap = HEAP_LINE.search(output)
         if heap:
@@ -386,6 +370,7 @@ def compile_bundle(
     qemu: bool = True,
     robot: Robot | None = None,
     model_changes: dict | None = None,
+    build_timeout: float | None = None,
 ) -> BuildReport:
     """Generate (and build) the C bundle of a spec into out_dir, atomically.
 
@@ -393,11 +378,13 @@ def compile_bundle(
     `sim.mismatch.scaled_robot`); `model_changes` says how it differs (e.g. {"mass_scale": 1.2}).
     The manifest (`model`, `model_sha256`) and the header then say that the bundle was
     generated for a modified model; the spec's SHA-256 stays that of the spec.
+    `build_timeout` bounds each make step, in s (default: $DCTS_BUILD_TIMEOUT, else 600 s).
 
     Raises SpecError for a broken spec and CodegenError for everything else; in both cases
     nothing is left at out_dir (an older bundle there stays untouched)."""
     if target not in TARGETS:
         raise CodegenError(f"unknown target {target!r}; choose one of {', '.join(TARGETS)}")
+    build_timeout = checked_timeout(build_timeout)  # a bad $DCTS_BUILD_TIMEOUT: before minutes of building
     out_dir = Path(out_dir).expanduser().absolute()
     if out_dir.name in ("", ".", ".."):
         raise CodegenError(f"invalid output directory {out_dir}")
@@ -423,10 +410,10 @@ def compile_bundle(
         manifest = sources.manifest
         report = BuildReport(out_dir, manifest, build)
         if build:
-            manifest["host"] = build_host(tmp, manifest, cc)
+            manifest["host"] = build_host(tmp, manifest, cc, build_timeout)
             manifest["built"] = True
         if target == "cortex-m7":
-            report.firmware = manifest["cortex_m7"] = build_firmware(tmp, manifest, qemu=qemu)
+            report.firmware = manifest["cortex_m7"] = build_firmware(tmp, manifest, qemu=qemu, timeout=build_timeout)
         (tmp / "manifest.json").write_text(json.dumps(manifest, indent=2) + "\n")
         install(tmp, out_dir)  # (files a user added to an older bundle stay)
     except BaseException as exc:
