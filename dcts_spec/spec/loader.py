@@ -15,6 +15,8 @@ from .errors import Diagnostic, KeyPath, SpecError, did_you_mean, shown
 from .source import SourceMap, read_yaml, read_yaml_file
 from .types import FieldError
 
+Document = typing.TypeVar("Document", bound=BaseModel)
+
 
 def load_spec(path: str | Path) -> Spec:
     """Read and check the structure of a spec file; raises SpecError listing every problem."""
@@ -29,15 +31,21 @@ def load_spec_text(text: str, file: str = "<text>") -> Spec:
 
 
 def spec_from_data(data: dict[str, Any], source: SourceMap) -> Spec:
-    try:
-        spec = Spec.model_validate(data)
-    except ValidationError as exc:
-        raise SpecError(_diagnostics(exc, data, source)) from None
+    spec = document_from_data(Spec, data, source)
     spec._source = source
     return spec
 
 
-def _diagnostics(exc: ValidationError, data: Any, source: SourceMap) -> list[Diagnostic]:
+def document_from_data(model: type[Document], data: dict[str, Any], source: SourceMap) -> Document:
+    """`data` as a `model` document (the spec, a campaign file): a SpecError locates every problem
+    in `source`, allowed keys named from `model`."""
+    try:
+        return model.model_validate(data)
+    except ValidationError as exc:
+        raise SpecError(_diagnostics(exc, data, source, model)) from None
+
+
+def _diagnostics(exc: ValidationError, data: Any, source: SourceMap, root: type[BaseModel]) -> list[Diagnostic]:
     found: dict[KeyPath, tuple[int, Diagnostic]] = {}
     for error in exc.errors(include_url=False):
         path, rest = _data_path(data, error["loc"])
@@ -50,7 +58,7 @@ def _diagnostics(exc: ValidationError, data: Any, source: SourceMap) -> list[Dia
         rank = _GENERIC_RANK.get(error["type"], 0)
         # A union reports one error per alternative; keep the most specific one.
         if key not in found or rank < found[key][0]:
-            found[key] = (rank, source.diagnostic(path, _message(error, path, rest, data)))
+            found[key] = (rank, source.diagnostic(path, _message(error, path, rest, data, root)))
     # A type mismatch of one alternative says nothing when another alternative found problems inside the
     # value (`external_torque: {mode: noisey}` is not the literal `ideal`, but the useful error is about `mode`).
     inside = {key[:end] for key in found for end in range(len(key))}  # proper prefixes: keys with errors below
@@ -92,12 +100,12 @@ def _value_at(data: Any, path: KeyPath) -> Any:
     return data
 
 
-def _message(error: dict, path: KeyPath, rest: tuple, data: Any) -> str:
+def _message(error: dict, path: KeyPath, rest: tuple, data: Any, root: type[BaseModel]) -> str:
     kind = error["type"]
     if kind == "extra_forbidden":
         key = rest[0] if rest else path[-1]
         parent = path if rest else path[:-1]
-        allowed = _allowed_keys(parent, data)
+        allowed = _allowed_keys(root, parent, data)
         hint = did_you_mean(str(key), allowed)
         return f"unknown key {shown(key)}{hint}; allowed keys: {', '.join(allowed)}" if allowed else f"unknown key {shown(key)}"
     if kind == "missing":
@@ -156,9 +164,9 @@ def _describe(value: Any) -> str:
     return shown(value)
 
 
-def _allowed_keys(path: KeyPath, data: Any) -> list[str]:
-    """Keys the spec model accepts at `path` (found by walking the model classes)."""
-    model = _model_at(Spec, path, data)
+def _allowed_keys(root: type[BaseModel], path: KeyPath, data: Any) -> list[str]:
+    """Keys the `root` model accepts at `path` (found by walking the model classes)."""
+    model = _model_at(root, path, data)
     return list(model.model_fields) if model is not None else []
 
 
