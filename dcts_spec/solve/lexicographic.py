@@ -136,21 +136,29 @@ class Cascade:
     def _proximal_steps(self, weights, linear, rho, step, lbx, ubx) -> np.ndarray | None:
         center, x = self.nominal, None
         linear_only = not weights.any()
+        seen = (weights != 0.0) | (linear != 0.0)
         for _ in range(PROXIMAL_ITERATIONS):
             solved = self._solve(np.diag(1.0 + weights / rho), linear / rho - center, lbx, ubx)
             if solved is None:
                 return x
             previous, x = x, solved
-            if np.linalg.norm(x - center) <= PROXIMAL_TOLERANCE * (1.0 + np.linalg.norm(x)):
+            if self._negligible(x - center, x):
                 return x
             if linear_only and self._at_best_bounds(x, linear, lbx, ubx):
                 return x
             center = x
-            if previous is not None:  # two iterates on the same face: move along it
+            # two iterates on the same face: move along it, as long as the objective's variables
+            # moved (else d is rounding noise along directions nothing sees, such as a run-time
+            # activation's spare null-space variables, which ×1e6 per step grew to 1e8)
+            if previous is not None and not self._negligible((x - previous)[seen], x):
                 d = x - previous
                 center = x + self._extrapolation(x, d, weights, linear, lbx, ubx) * d
             rho = max(0.1 * rho, step)
         return x
+
+    @staticmethod
+    def _negligible(step: np.ndarray, x: np.ndarray) -> bool:
+        return bool(np.linalg.norm(step) <= PROXIMAL_TOLERANCE * (1.0 + np.linalg.norm(x)))
 
     @staticmethod
     def _at_best_bounds(x, linear, lbx, ubx) -> bool:
