@@ -1,4 +1,4 @@
-"""The `dcts` command line: validate, schema, compile, bench, simulate, compare, robots, describe, init.
+"""The `dcts` command line: validate, schema, compile, bench, simulate, compare, sweep, robots, describe, init.
 
 Conventions shared by every command (see EPILOG): `-o/--out` names what a command writes, with
 one default rule; flags take no value; bad option values are usage errors (exit 2), bad specs
@@ -271,6 +271,38 @@ def compare(
     names: list[str] = formulations  # type: ignore[assignment]  # (the callback split it)
     with _feedback(quiet):
         code = compare_command(file, out, options, names, plots)
+    raise typer.Exit(code)
+
+
+@command()
+def sweep(
+    file: Annotated[Path, typer.Argument(help="spec file")],
+    campaign: Annotated[Path, typer.Option("--campaign", "-c", help="campaign file: what is drawn or gridded, "
+                                           "how many samples, the seed (see docs/sweep.md)")],
+    out: Annotated[Path, typer.Option("--out", "-o", help="output folder; running the same command again resumes "
+                                      "the campaign in it")],
+    serial: Annotated[bool, typer.Option("--serial", help="run the samples in a plain loop in this process "
+                                         "instead of Ray (the throughput baseline)")] = False,
+    address: Annotated[Optional[str], typer.Option(help="a Ray cluster's address (default: a local Ray session "
+                                                   "on every core of this machine)")] = None,
+    workers: Annotated[Optional[int], typer.Option(min=1, help="at most this many Ray workers")] = None,
+    max_samples: Annotated[Optional[int], typer.Option(min=0, help="run at most this many of the samples not yet "
+                                                       "done, then write the report (resume later)")] = None,
+    optimize: Annotated[Optional[str], typer.Option(help="tune the campaign's controller values for the best "
+                                                    "METRIC over its samples (Optuna)", metavar="METRIC")] = None,
+    objective: Annotated[Literal["worst", "mean"], typer.Option(help="--optimize: the worst or the mean METRIC "
+                                                                "over the samples")] = "worst",
+    trials: Annotated[int, typer.Option(min=1, help="--optimize: controller values tried")] = 20,
+    quiet: QuietOption = False,
+) -> None:
+    """Run a campaign of samples (pushes, payloads, mismatch, noise, start states, gains) on the compiled
+    controller; write the samples, rates, worst cases with their replay specs, and plots."""
+    from .campaign.command import SweepCommand, sweep_command
+
+    command = SweepCommand(file, campaign, out, "serial" if serial else "ray", address, workers, max_samples,
+                           optimize, objective, trials, quiet)
+    with _feedback(quiet):
+        code = sweep_command(command)
     raise typer.Exit(code)
 
 

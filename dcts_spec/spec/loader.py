@@ -67,7 +67,8 @@ def _diagnostics(exc: ValidationError, data: Any, source: SourceMap, root: type[
 
 
 # How generic an error type is: a union alternative's type mismatch says less than the others.
-_GENERIC_RANK = {"literal_error": 1, "model_type": 2, "dict_type": 2, "model_attributes_type": 2, "list_type": 2}
+_GENERIC_RANK = {"literal_error": 1, "model_type": 2, "dict_type": 2, "model_attributes_type": 2, "list_type": 2,
+                 "tuple_type": 2}
 
 
 def _data_path(data: Any, loc: tuple) -> tuple[KeyPath, tuple]:
@@ -126,7 +127,7 @@ def _message(error: dict, path: KeyPath, rest: tuple, data: Any, root: type[Base
         return f"missing key {tag_key!r} (what kind of entry this is)"
     if kind in ("model_type", "dict_type", "model_attributes_type"):
         return f"expected a mapping of keys, got {_describe(error['input'])}"
-    if kind == "list_type":
+    if kind in ("list_type", "tuple_type"):
         return f"expected a list, got {_describe(error['input'])}"
     if kind == "string_pattern_mismatch":
         return f"{shown(error['input'])} is not an identifier (letters, digits and _, not starting with a digit)"

@@ -1,0 +1,68 @@
+"""What `dcts sweep` does once its arguments are parsed: a campaign (or an optimization), its
+summary on the terminal, and an exit code (1 for a bad input, with its location; 130 when
+interrupted, the finished samples kept for the next run to resume from)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import typer
+
+from ..codegen import CodegenError
+from ..files import OutputFolderError
+from ..sim.runtime import RuntimeUnavailable
+from ..spec import SpecError
+from .optimize import UnknownMetric, tune
+from .report import summary_lines
+from .results import SAMPLES
+from .sweep import Engine, SweepOptions, sweep
+
+INTERRUPTED = 130
+
+
+@dataclass(frozen=True)
+class SweepCommand:
+    spec: Path
+    campaign: Path
+    out: Path
+    engine: Engine = "ray"
+    address: str | None = None
+    workers: int | None = None
+    max_samples: int | None = None
+    optimize: str | None = None  # the metric
+    objective: str = "worst"
+    trials: int = 20
+    quiet: bool = False
+
+
+def sweep_command(c: SweepCommand) -> int:
+    options = SweepOptions(c.engine, c.address, c.workers, not c.quiet, c.max_samples)
+    try:
+        if c.optimize is None:
+            result = sweep(c.spec, c.campaign, c.out, options)
+        else:
+            result = tune(c.spec, c.campaign, c.out, c.optimize, c.objective, c.trials, options)
+    except SpecError as error:
+        typer.echo(str(error), err=True)
+        return 1
+    except UnknownMetric as error:
+        typer.echo(f"error: {error}", err=True)
+        return 2
+    except (OutputFolderError, RuntimeUnavailable, CodegenError) as error:
+        typer.echo(f"error: {error}", err=True)
+        return 1
+    except KeyboardInterrupt:
+        typer.echo(f"interrupted: the finished samples are in {c.out / SAMPLES}; run the same command to resume",
+                   err=True)
+        return INTERRUPTED
+    if not c.quiet:
+        typer.echo("\n".join(summary_lines(result.report)))
+        best = result.report.get("optimize", {}).get("best")
+        if best:
+            typer.echo(f"  best of {result.report['optimize']['trials']} trials: {best['values']} "
+                       f"({result.report['optimize']['objective']} {c.optimize} = {best['value']:.4g})")
+        state = "" if result.complete else f" ({result.report['finished']} of {result.report['samples']} samples: " \
+                                          "run the same command to go on)"
+        typer.echo(f"wrote {c.out}/ (samples.jsonl, report.json, report.html, plots/, replays/){state}")
+    return 0

@@ -1,0 +1,129 @@
+"""Where the samples run: Ray actors (this machine by default, a cluster given its address), or a
+plain serial loop in this process (the baseline the throughput is compared with).
+
+Either pool yields rows as samples finish, in whatever order they finish; each worker is one
+SampleRunner that keeps its loaded spec and bundles between samples.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
+from typing import Any, Protocol
+
+from .runner import CampaignInputs, SampleRunner
+
+IN_FLIGHT = 2  # samples queued per Ray worker: it never waits for the driver between samples
+
+
+@dataclass
+class Throughput:
+    """Samples run by this invocation and how long they took (startup: the pool's, not counted)."""
+
+    engine: str
+    workers: int
+    samples: int = 0
+    seconds: float = 0.0
+    startup_seconds: float = 0.0
+
+    @property
+    def samples_per_second(self) -> float | None:
+        return self.samples / self.seconds if self.seconds > 0 else None
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"engine": self.engine, "workers": self.workers, "samples": self.samples,
+                "seconds": self.seconds, "startup_seconds": self.startup_seconds,
+                "samples_per_second": self.samples_per_second}
+
+
+class Pool(Protocol):
+    throughput: Throughput
+
+    def map(self, indices: list[int], parameters: dict[str, Any] | None = None) -> Iterator[dict[str, Any]]: ...
+
+
+class SerialPool:
+    """One SampleRunner in this process, one sample after the other."""
+
+    def __init__(self, runner: SampleRunner):
+        self.runner = runner
+        self.throughput = Throughput("serial", 1)
+
+    def map(self, indices: list[int], parameters: dict[str, Any] | None = None) -> Iterator[dict[str, Any]]:
+        for index in indices:
+            start = time.perf_counter()
+            row = self.runner.run(index, parameters)
+            self.throughput.seconds += time.perf_counter() - start
+            self.throughput.samples += 1
+            yield row
+
+
+class RayPool:
+    """One Ray actor per CPU of the Ray cluster, each a SampleRunner."""
+
+    def __init__(self, inputs: CampaignInputs, workers: int | None = None):
+        import ray
+
+        start = time.perf_counter()
+        cpus = int(ray.cluster_resources().get("CPU", 1))
+        count = max(1, min(workers or cpus, cpus))
+        actor = ray.remote(num_cpus=1)(SampleRunner)
+        self._actors = [actor.remote(inputs) for _ in range(count)]
+        ray.get([a.__ray_ready__.remote() for a in self._actors])
+        self.throughput = Throughput("ray", count, startup_seconds=time.perf_counter() - start)
+
+    def map(self, indices: list[int], parameters: dict[str, Any] | None = None) -> Iterator[dict[str, Any]]:
+        import ray
+
+        todo = iter(indices)
+        pending: dict[Any, Any] = {}
+
+        def submit(actor: Any) -> None:
+            index = next(todo, None)
+            if index is not None:
+                pending[actor.run.remote(index, parameters)] = actor
+
+        for actor in self._actors:
+            for _ in range(IN_FLIGHT):
+                submit(actor)
+        start, before = time.perf_counter(), self.throughput.seconds
+        try:
+            while pending:
+                done, _ = ray.wait(list(pending), num_returns=1)
+                actor = pending.pop(done[0])
+                submit(actor)
+                row = ray.get(done[0])
+                self.throughput.samples += 1
+                self.throughput.seconds = before + time.perf_counter() - start
+                yield row
+        finally:
+            for ref in pending:  # an interrupted map: the queued samples are not wanted any more
+                ray.cancel(ref)
+
+    def close(self) -> None:
+        import ray
+
+        for actor in self._actors:
+            ray.kill(actor)
+
+
+@contextmanager
+def ray_session(address: str | None = None, cpus: int | None = None) -> Iterator[None]:
+    """Ray on this machine (no setup: a local session started and stopped here), or the cluster at
+    `address`; a session already open in this process (a test's, a notebook's) is used as it is."""
+    import ray
+
+    if ray.is_initialized():
+        yield
+        return
+    options: dict[str, Any] = {"include_dashboard": False, "log_to_driver": False, "configure_logging": False}
+    if address is None:
+        options["num_cpus"] = cpus or os.cpu_count() or 1
+    ray.init(address=address, **options)
+    try:
+        yield
+    finally:
+        ray.shutdown()

@@ -1,0 +1,126 @@
+"""`dcts sweep --optimize METRIC`: Optuna searches the campaign's controller values for the best
+worst-case (or mean) METRIC over the campaign's samples.
+
+Every trial runs the same samples (the same draws: common random numbers, so trials differ only
+by the controller) on the campaign's engine, its swept run-time parameters and formulation
+replaced by the trial's. The study lives in the output folder (an Optuna journal file), so an
+interrupted optimization resumes with the trials it finished. The best values then run once more
+as the campaign's samples, which the usual report describes.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+from ..spec.errors import SpecError, did_you_mean
+from .document import Distribution
+from .report import LOWER_IS_WORSE
+from .sweep import CampaignSession, SweepOptions, SweepResult, allowed_metrics, campaign_session
+
+JOURNAL = "optuna.journal"
+TRIALS = "trials.jsonl"
+
+
+def search_space(session: CampaignSession) -> dict[str, Distribution | list[str]]:
+    """Parameter name (or `formulation`) to its range: the campaign's controller values that
+    vary (a range or a set; a normal distribution has no range and is refused at its line)."""
+    controller = session.campaign.controller
+    space: dict[str, Distribution | list[str]] = {}
+    src = session.campaign.source
+    if controller is None:
+        raise SpecError([src.diagnostic((), "--optimize needs controller values to tune: a `controller:` section "
+                                         "with `parameters` (or several formulations)")])
+    for name, value in controller.parameters.items():
+        if isinstance(value, list):
+            raise SpecError([src.diagnostic(("controller", "parameters", name), "--optimize tunes one value per "
+                                            "parameter: give one range for all its components")])
+        if value.kind == "normal":
+            raise SpecError([src.diagnostic(("controller", "parameters", name), "--optimize needs a range "
+                                            "(uniform, loguniform) or a set (choice, grid), not normal")])
+        if value.kind != "fixed":
+            space[name] = value
+    formulations = session.driver.sampler.formulations
+    if len(formulations) > 1:
+        space["formulation"] = [str(f) for f in formulations]
+    if not space:
+        raise SpecError([src.diagnostic(("controller",), "--optimize: no controller value varies here: give a "
+                                        "parameter a range or a set")])
+    return space
+
+
+def optimize(session: CampaignSession, metric: str, objective: str, trials: int) -> dict[str, Any]:
+    """Run the study up to `trials` finished trials; return its record for the report."""
+    import optuna
+    from optuna.storages import JournalStorage
+    from optuna.storages.journal import JournalFileBackend
+
+    optuna.logging.set_verbosity(optuna.logging.WARNING)
+    space = search_space(session)
+    folder = session.folder.folder
+    storage = JournalStorage(JournalFileBackend(str(folder / JOURNAL)))
+    direction = "maximize" if metric in LOWER_IS_WORSE else "minimize"
+    study = optuna.create_study(study_name="dcts-sweep", storage=storage, load_if_exists=True, direction=direction,
+                                sampler=optuna.samplers.TPESampler(seed=session.campaign.seed))
+    indices = list(range(session.driver.sampler.count))
+    finished = sum(t.state == optuna.trial.TrialState.COMPLETE for t in study.trials)
+    for _ in range(max(0, trials - finished)):
+        trial = study.ask()
+        values = {name: _suggest(trial, name, d) for name, d in space.items()}
+        rows = session.run(indices, values)
+        score = _objective(rows, metric, objective, direction)
+        study.tell(trial, score)
+        _append(folder / TRIALS, {"trial": trial.number, "values": values, objective: score})
+    best = study.best_trial
+    return {"metric": metric, "objective": objective, "direction": direction, "trials": len(study.trials),
+            "best": {"trial": best.number, "values": best.params, "value": best.value},
+            "history": [{"trial": t.number, "values": t.params, "value": t.value} for t in study.trials
+                        if t.state == optuna.trial.TrialState.COMPLETE]}
+
+
+def _suggest(trial: Any, name: str, d: Distribution | list[str]) -> Any:
+    if isinstance(d, list):
+        return trial.suggest_categorical(name, d)
+    if d.uniform is not None:
+        return trial.suggest_float(name, *d.uniform)
+    if d.loguniform is not None:
+        return trial.suggest_float(name, *d.loguniform, log=True)
+    return trial.suggest_categorical(name, d.values)
+
+
+def _objective(rows: list[dict[str, Any]], metric: str, objective: str, direction: str) -> float:
+    """The worst (or mean) metric over the samples; a sample that did not run counts as the worst
+    possible, so a controller that breaks any sample never wins."""
+    bad = -math.inf if direction == "maximize" else math.inf
+    values = [r.get(metric) if r["status"] == "ok" else None for r in rows]
+    values = [bad if v is None else float(v) for v in values]
+    if objective == "mean":
+        return sum(values) / len(values)
+    return min(values) if direction == "maximize" else max(values)
+
+
+def _append(path: Path, record: dict[str, Any]) -> None:
+    with path.open("a", encoding="utf-8") as f:
+        f.write(json.dumps(record) + "\n")
+
+
+class UnknownMetric(ValueError):
+    """--optimize names no per-run metric of this spec."""
+
+
+def tune(spec_file: str | Path, campaign_file: str | Path, out: str | Path, metric: str, objective: str = "worst",
+         trials: int = 20, options: SweepOptions = SweepOptions()) -> SweepResult:
+    """Optimize the campaign's controller values for `metric` (see the module docstring), then
+    run the campaign's samples with the best ones and write the report."""
+    settings = {"mode": "optimize", "metric": metric, "objective": objective}
+    with campaign_session(spec_file, campaign_file, out, settings, options) as session:
+        allowed = allowed_metrics(session.driver)
+        if metric not in allowed:
+            raise UnknownMetric(f"--optimize: unknown metric {metric!r}{did_you_mean(metric, allowed)}; allowed: "
+                                f"{', '.join(allowed)}")
+        record = optimize(session, metric, objective, trials)
+        session.parameters = record["best"]["values"]
+        session.run(session.todo())
+        return session.finish({"optimize": record})

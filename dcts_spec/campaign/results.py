@@ -1,0 +1,105 @@
+"""A campaign's output folder: the samples streamed to samples.jsonl as they finish, and what
+makes resuming safe.
+
+campaign.json records the SHA-256 of the spec and campaign files (and the optimization's
+settings); running the same command again skips the samples already in samples.jsonl, and a
+changed file is refused at its line. The folder follows dcts' output rules (`files.py`): it is
+written only if absent, empty, or written by dcts (its OWNED file lists what dcts wrote there).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import shutil
+from collections.abc import Iterable
+from pathlib import Path
+from typing import Any
+
+from ..files import OWNED, OutputFolderError, check_writable, owned_names
+from ..spec.errors import Diagnostic, SpecError
+
+STATE = "campaign.json"
+SAMPLES = "samples.jsonl"
+REPORT_NAMES = ("report.json", "report.html", "plots", "replays")
+NAMES = (STATE, SAMPLES, *REPORT_NAMES, "trials.jsonl")
+
+
+def file_digest(path: Path) -> str:
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+
+
+class ResultsFolder:
+    """DIR of `dcts sweep --out DIR`."""
+
+    def __init__(self, folder: Path, spec_file: Path, campaign_file: Path, settings: dict[str, Any]):
+        self.folder = Path(folder)
+        self.state = {"spec": str(spec_file), "spec_sha256": file_digest(spec_file), "campaign": str(campaign_file),
+                      "campaign_sha256": file_digest(campaign_file), "settings": settings}
+        self._files = {"spec": Path(spec_file), "campaign": Path(campaign_file)}
+
+    @property
+    def samples_file(self) -> Path:
+        return self.folder / SAMPLES
+
+    def open(self) -> dict[int, dict[str, Any]]:
+        """Check the folder, record the campaign (or check it is the recorded one) and return
+        the rows already finished, by sample index."""
+        check_writable(self.folder)
+        state_file = self.folder / STATE
+        if state_file.is_file():
+            self._check_same(json.loads(state_file.read_text()))
+        elif owned_names(self.folder):
+            raise OutputFolderError(f"{self.folder} holds another dcts output (no {STATE}): choose another output "
+                                    "folder for the campaign")
+        self.folder.mkdir(parents=True, exist_ok=True)
+        (self.folder / OWNED).write_text(json.dumps(sorted(NAMES)) + "\n")
+        state_file.write_text(json.dumps(self.state, indent=2) + "\n")
+        return self._finished()
+
+    def _check_same(self, recorded: dict[str, Any]) -> None:
+        for what in ("spec", "campaign"):
+            if recorded.get(f"{what}_sha256") != self.state[f"{what}_sha256"]:
+                raise SpecError([Diagnostic(
+                    f"this {what} file changed since {self.folder} was started with it ({STATE} records SHA-256 "
+                    f"{str(recorded.get(f'{what}_sha256'))[:12]}…, the file has {self.state[f'{what}_sha256'][:12]}…): "
+                    "its samples would not be comparable; give another --out folder, or remove that one to start "
+                    "again", file=str(self._files[what]), line=1, column=1)])
+        if recorded.get("settings") != self.state["settings"]:
+            raise SpecError([Diagnostic(
+                f"{self.folder} was started with other settings ({recorded.get('settings')}, now "
+                f"{self.state['settings']}): give another --out folder, or the same options",
+                file=str(self._files["campaign"]), line=1, column=1)])
+
+    def _finished(self) -> dict[int, dict[str, Any]]:
+        """The rows of samples.jsonl; a last line cut short by a kill is dropped (and cut off)."""
+        rows: dict[int, dict[str, Any]] = {}
+        path = self.samples_file
+        if not path.is_file():
+            return rows
+        data = path.read_bytes()
+        complete = data[: data.rfind(b"\n") + 1]
+        if len(complete) != len(data):
+            with path.open("r+b") as f:
+                f.truncate(len(complete))
+        for line in complete.decode().splitlines():
+            if line.strip():
+                row = json.loads(line)
+                rows[int(row["index"])] = row
+        return rows
+
+    def append(self, rows: Iterable[dict[str, Any]]) -> None:
+        """Add finished rows: one line each, flushed at once (an interrupted campaign keeps them)."""
+        with self.samples_file.open("a", encoding="utf-8") as f:
+            for row in rows:
+                f.write(json.dumps(row) + "\n")
+                f.flush()
+
+    def clear_report(self) -> None:
+        """Remove the previous report (dcts wrote it: named in OWNED) before writing the new one."""
+        for name in REPORT_NAMES:
+            path = self.folder / name
+            if path.is_dir():
+                shutil.rmtree(path)
+            elif path.exists():
+                path.unlink()

@@ -1,0 +1,250 @@
+"""`dcts sweep` as a Python function: check the campaign, build each bundle once, run the
+samples not yet in the folder on the engine, write the report."""
+
+from __future__ import annotations
+
+import shlex
+from collections.abc import Iterator
+from contextlib import ExitStack, contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Literal
+
+from ..codegen.cache import default_cache_dir
+from ..codegen.loader import CompiledController
+from ..phases import phase
+from ..spec.errors import Diagnostic, SpecError, did_you_mean
+from .document import Campaign, load_campaign
+from .engine import Pool, RayPool, SerialPool, Throughput, ray_session
+from .progress import sample_progress
+from .report import rates, replay_name, save_json, summarize_metrics, worst_cases, write_html, write_plots
+from .results import ResultsFolder
+from .runner import CampaignInputs, SampleRunner
+from .scenario import replay_yaml
+
+Engine = Literal["ray", "serial"]
+TASK_METRICS = ("task_rms_error", "task_mean_error", "task_final_error")
+# Per-run numbers a report may rank (besides the task metrics and primary_rms_error).
+RUN_METRICS = ("max_joint_position_violation", "max_joint_velocity_violation", "max_joint_velocity_violation_ratio",
+               "max_torque_violation", "max_cartesian_violation", "max_collision_violation", "solver_failures",
+               "limits_relaxed", "min_scaling", "primary_mean_acceleration_error", "acceleration_energy_integral",
+               "kinetic_energy_peak", "task_space_kinetic_energy_peak", "null_space_kinetic_energy_peak",
+               "max_disturbance_torque", "max_external_torque_estimate_error", "wall_time")
+
+
+@dataclass(frozen=True)
+class SweepOptions:
+    engine: Engine = "ray"
+    address: str | None = None  # a Ray cluster's; None: a local session with every core
+    workers: int | None = None  # at most this many (default: one per CPU Ray has)
+    progress: bool = True
+    max_samples: int | None = None  # run at most this many new samples, then report (and stop)
+
+
+@dataclass
+class SweepResult:
+    folder: Path
+    report: dict[str, Any]
+    complete: bool  # every sample of the campaign has a row
+
+
+def sweep(spec_file: str | Path, campaign_file: str | Path, out: str | Path,
+          options: SweepOptions = SweepOptions()) -> SweepResult:
+    """Run the campaign's samples of the spec not yet in `out`/samples.jsonl; write the report.
+
+    Raises SpecError (located in the spec or the campaign file) for a bad input or a folder
+    started with other files, OutputFolderError for a folder dcts did not write."""
+    with campaign_session(spec_file, campaign_file, out, {"mode": "sweep"}, options) as session:
+        session.run(session.todo())
+        return session.finish()
+
+
+class CampaignSession:
+    """A campaign's checked inputs, its folder and its pool, for a sweep or an optimization."""
+
+    def __init__(self, spec_file: Path, campaign_file: Path, out: Path, settings: dict[str, Any],
+                 options: SweepOptions):
+        self.options = options
+        self.spec_file, self.campaign_file = spec_file, campaign_file
+        self.campaign: Campaign = load_campaign(campaign_file)  # its errors before the spec's
+        self.inputs = CampaignInputs(str(spec_file), spec_file.read_text(encoding="utf-8"), str(campaign_file),
+                                     campaign_file.read_text(encoding="utf-8"), str(default_cache_dir()))
+        self.driver = SampleRunner(self.inputs)
+        self.folder = ResultsFolder(out, spec_file, campaign_file, settings)
+        check_campaign(self.driver)
+        self.rows = self.folder.open()
+        phase(f"building the C controller{'s' if len(self._bundles()) > 1 else ''} (once)")
+        for formulation, mass_scale in self._bundles():
+            self.driver.bundle(formulation, mass_scale)
+        check_parameters(self.driver)
+        self.pool: Pool | None = None
+        self.parameters: dict[str, Any] | None = None  # the optimizer's best, for the campaign's rows
+        self._stack = ExitStack()  # the Ray session, once a pool is wanted
+
+    def _bundles(self) -> list[tuple[str | None, float]]:
+        sampler = self.driver.sampler
+        return [(f, s) for f in sampler.formulations for s in sampler.mass_scales()]
+
+    def todo(self) -> list[int]:
+        todo = [i for i in range(self.driver.sampler.count) if i not in self.rows]
+        return todo[: self.options.max_samples] if self.options.max_samples is not None else todo
+
+    def start_pool(self) -> Pool:
+        """The engine's pool, started on first use (Ray only once the inputs proved good)."""
+        if self.pool is None and self.options.engine == "serial":
+            self.pool = SerialPool(self.driver)
+        elif self.pool is None:
+            phase("starting Ray" + (f" at {self.options.address}" if self.options.address else " on this machine"))
+            self._stack.enter_context(ray_session(self.options.address))
+            self.pool = RayPool(self.inputs, self.options.workers)
+        return self.pool
+
+    def run(self, indices: list[int], trial: dict[str, Any] | None = None) -> list[dict[str, Any]]:
+        """Run samples on the pool. The campaign's rows go to samples.jsonl as they finish; an
+        optimization `trial`'s (its controller values) are only returned."""
+        if not indices:
+            return []
+        pool = self.start_pool()
+        phase(f"running {len(indices)} samples on {pool.throughput.engine} ({pool.throughput.workers} workers)"
+              + (f" with {trial}" if trial else ""))
+        out = []
+        total, done = (len(indices), 0) if trial else (self.driver.sampler.count, len(self.rows))
+        with sample_progress(total, done, "samples", self.options.progress) as advance:
+            for row in pool.map(indices, trial or self.parameters):
+                if not trial:
+                    self.folder.append([row])
+                    self.rows[row["index"]] = row
+                out.append(row)
+                advance()
+        return out
+
+    def finish(self, extra: dict[str, Any] | None = None) -> SweepResult:
+        """Write the report of the rows so far."""
+        phase("writing the report")
+        report = self.report(extra or {})
+        return SweepResult(self.folder.folder, report, len(self.rows) == self.driver.sampler.count)
+
+    def report(self, extra: dict[str, Any]) -> dict[str, Any]:
+        rows = [self.rows[i] for i in sorted(self.rows)]
+        settings = self.campaign.report
+        folder = self.folder.folder
+        self.folder.clear_report()
+        (folder / "replays").mkdir()
+        worst = []
+        for metric in settings.metrics:
+            for row in worst_cases(rows, metric, settings.worst):
+                worst.append(self._replay(metric, row))
+        plots = write_plots(rows, self.driver.sampler.swept(), list(settings.metrics), folder)
+        throughput = self.pool.throughput if self.pool else Throughput(self.options.engine, 0)
+        report = {
+            "title": f"{self.driver.spec.name}: campaign {self.campaign_file.name}",
+            "spec": str(self.spec_file), "campaign": str(self.campaign_file),
+            "samples": self.driver.sampler.count, "finished": len(rows),
+            "rates": rates(rows, settings),
+            "metrics": summarize_metrics(rows, list(settings.metrics)),
+            "worst_cases": worst, "plots": plots, "throughput": throughput.to_dict(), **extra,
+        }
+        save_json(report, folder / "report.json")
+        write_html(report, plots, folder / "report.html")
+        return report
+
+    def _replay(self, metric: str, row: dict[str, Any]) -> dict[str, Any]:
+        """The worst case's spec, written for `dcts simulate` (the sample's own data)."""
+        index = row["index"]
+        name = replay_name(index)
+        path = self.folder.folder / name
+        data = self.driver.spec_data(self.driver.sample(index, self.parameters))
+        comment = (f"Sample {index} (seed {row['seed']}) of the campaign {self.campaign_file} on {self.spec_file}: "
+                   f"replay with\n  dcts simulate {path}")
+        if not path.exists():
+            path.write_text(replay_yaml(data, self.spec_file, path, comment), encoding="utf-8")
+        command = f"dcts simulate {shlex.quote(str(path))} -o {shlex.quote(str(path.with_suffix('')))}"
+        return {"metric": metric, "value": row[metric], "index": index, "seed": row["seed"], "replay": name,
+                "command": command}
+
+    def close(self) -> None:
+        if isinstance(self.pool, RayPool):
+            self.pool.close()
+        self._stack.close()
+
+
+@contextmanager
+def campaign_session(spec_file: str | Path, campaign_file: str | Path, out: str | Path, settings: dict[str, Any],
+                     options: SweepOptions) -> Iterator[CampaignSession]:
+    session = CampaignSession(Path(spec_file), Path(campaign_file), Path(out), settings, options)
+    try:
+        yield session
+    finally:
+        session.close()
+
+
+def allowed_metrics(driver: SampleRunner) -> list[str]:
+    """The per-run numbers a report ranks and an optimization optimizes."""
+    tasks = [t.name for t in driver.spec.tasks]
+    return [*RUN_METRICS, "primary_rms_error", *(f"{m}.{t}" for m in TASK_METRICS for t in tasks)]
+
+
+def check_campaign(driver: SampleRunner) -> None:
+    """What the campaign file names exists in the spec: pushed bodies, payload frames, the
+    tasks and metrics of the report, a duration when the spec has no scenario."""
+    campaign, robot, spec = driver.campaign, driver.robot, driver.spec
+    src = campaign.source
+    diagnostics: list[Diagnostic] = []
+    frames = [f.name for f in robot.model.frames]
+    for kind, key, entries in (("pushes", "body", campaign.pushes), ("payloads", "frame", campaign.payloads)):
+        for i, entry in enumerate(entries):
+            name = getattr(entry, key)
+            if not robot.has_frame(name):
+                diagnostics.append(src.diagnostic((kind, i, key), f"no frame {name!r} in the robot"
+                                                  f"{did_you_mean(name, frames)}"))
+    tasks = [t.name for t in spec.tasks]
+    allowed = allowed_metrics(driver)
+    for i, metric in enumerate(campaign.report.metrics):
+        if metric not in allowed:
+            diagnostics.append(src.diagnostic(("report", "metrics", i), f"unknown metric {metric!r}"
+                                              f"{did_you_mean(metric, allowed)}; allowed: {', '.join(allowed)}"))
+    for task in campaign.report.convergence:
+        if task not in tasks:
+            diagnostics.append(src.diagnostic(("report", "convergence", task), f"no task {task!r} in the spec"
+                                              f"{did_you_mean(task, tasks)}; tasks: {', '.join(tasks)}"))
+    if spec.scenario is None and campaign.duration is None:
+        diagnostics.append(src.diagnostic((), "the spec has no scenario: give the runs' `duration` here"))
+    if diagnostics:
+        raise SpecError(diagnostics)
+
+
+def check_parameters(driver: SampleRunner) -> None:
+    """The swept run-time parameters exist in the compiled controller and their values stay in
+    its ranges (checked on the built bundle, which knows them)."""
+    controller = driver.campaign.controller
+    if controller is None or not controller.parameters:
+        return
+    src = driver.campaign.source
+    bundle = CompiledController(driver.bundle(driver.sampler.formulations[0], 1.0))
+    layout = bundle.param_layout
+    bundle.close()
+    known = [e.name for e in layout.entries]
+    diagnostics = []
+    for name, value in controller.parameters.items():
+        at = ("controller", "parameters", name)
+        if name not in known:
+            hint = ("the spec declares none: add a `parameters:` section to it (e.g. parameters: {tasks: "
+                    "{<task>: [kp, kd]}})" if not known else f"the spec's are: {', '.join(known)}")
+            diagnostics.append(src.diagnostic(at, f"{name!r} is not a run-time parameter of the spec"
+                                              f"{did_you_mean(name, known)}; {hint}"))
+            continue
+        entry = layout.entry(name)
+        values = value if isinstance(value, list) else [value]
+        if isinstance(value, list) and len(value) != entry.size:
+            diagnostics.append(src.diagnostic(at, f"{len(value)} values; {name} takes {entry.size} "
+                                              f"({', '.join(entry.components)}) or one for all"))
+            continue
+        for k, d in enumerate(values):
+            bounds = d.bounds
+            low, high = min(entry.lower), max(entry.upper)
+            if bounds is not None and (bounds[0] < low or bounds[1] > high):
+                where = at + ((k,) if isinstance(value, list) else ())
+                diagnostics.append(src.diagnostic(where, f"values from {bounds[0]:g} to {bounds[1]:g} leave the "
+                                                  f"allowed range [{low:g}, {high:g}] {entry.unit}"))
+    if diagnostics:
+        raise SpecError(diagnostics)
