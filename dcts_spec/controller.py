@@ -23,7 +23,7 @@ from .formulations.parameters import ParameterLayout
 from .formulations.qp import BOUNDS
 from .parameter_ramp import ParameterRamp, ramp_steps
 from .robot.model import Robot
-from .solve import Structure, check_bounds, solve_lexicographic
+from .solve import Structure, check_bounds, solve_lexicographic, unbounded_solution
 from .spec import Spec, load_spec
 from .tasks import ReferenceInput
 from .validate import ValidationReport, validate_spec
@@ -227,14 +227,10 @@ class Controller:
 
     # -- running ---------------------------------------------------------------------------------
 
-    def _solve(self, data: dict[str, np.ndarray], unbounded: bool = False) -> np.ndarray | None:
-        """The lexicographic solution at the data (None if DAQP failed); `unbounded`: with the
-        torque limits and the joint/Cartesian bounds left out."""
-        lba, uba = data["lba"].ravel(), data["uba"].ravel()
-        if unbounded:
-            lba, uba = np.full(lba.size, -np.inf), np.full(uba.size, np.inf)
+    def _solve(self, data: dict[str, np.ndarray]) -> np.ndarray | None:
+        """The lexicographic solution at the data (None if DAQP failed)."""
         return solve_lexicographic(data["H"], data["f"].ravel(), data["A"], data["lbx"].ravel(), data["ubx"].ravel(),
-                                   lba, uba, self._structure)
+                                   data["lba"].ravel(), data["uba"].ravel(), self._structure)
 
     def _binding(self, data: dict[str, np.ndarray], x: np.ndarray) -> bool:
         """Does a torque limit or a joint/Cartesian bound bind at x?"""
@@ -248,9 +244,7 @@ class Controller:
     def _least_squares_scaling(self, data: dict[str, np.ndarray], x: np.ndarray) -> float:
         if not self._binding(data, x):
             return 1.0
-        free = self._solve(data, unbounded=True)
-        if free is None:
-            return 0.0
+        free = unbounded_solution(data["H"], data["f"].ravel(), data["ubx"].ravel(), self._structure)
         P, p0 = data["P"], data["p0"].ravel()
         return least_squares_scaling(P @ x + p0, P @ free + p0)
 

@@ -25,6 +25,7 @@ import pinocchio as pin
 import pytest
 
 from dcts_spec.controller import Controller
+from dcts_spec.solve import solve_lexicographic, unbounded_solution
 from dcts_spec.robot.builtin import example_robot_data_dir
 from dcts_spec.spec import load_spec_text
 from dcts_spec.validate import validate_spec
@@ -370,6 +371,21 @@ def test_reference_equals_closed_form_without_bounds(robot):
         assert sol.feasible and sol.scaling == [1.0, 1.0]
         assert _rel(sol.tau, tau) < 1e-8, (sol.tau, tau)  # (UR5: its null space is the light wrist 3)
         assert _rel(sol.a, a) < 1e-8
+
+
+@pytest.mark.parametrize("robot", ROBOTS)
+def test_unbounded_solution_is_the_cascade_without_rows(robot):
+    """The closed form an over-constrained posture's scaling is reported against equals the
+    cascade (DAQP) with every torque limit and bound removed, in states where they bind."""
+    cs = case(robot, 3)
+    c = cs.controller
+    for st in near_bound_states(robot, cs.model, 12, seed=17):
+        data = c.evaluate_data(st.q, st.dq, st.tau_ext)
+        H, f, lbx, ubx = data["H"], data["f"].ravel(), data["lbx"].ravel(), data["ubx"].ravel()
+        free = np.full(data["lba"].size, np.inf)
+        expected = solve_lexicographic(H, f, data["A"], lbx, ubx, -free, free, c._structure)
+        closed = unbounded_solution(H, f, ubx, c._structure)
+        assert _rel(closed, expected) < 1e-8, (closed, expected)
 
 
 # -- regression: panda, tool z ≥ 0.30, position target below it -------------------------------------

@@ -20,6 +20,7 @@ def array_lengths(nx: int, na: int, nlevels: int, nref: int, nr: int, np_: int) 
         "nref": max(nref, 1), "nx": max(nx, 1), "na": max(na, 1), "nc": max(nx + na, 1), "nlevels": max(nlevels, 1),
         "nr": max(nr, 1), "np": max(np_, 1),
         "nx2": max(nx + nr, 1), "na2": max(na + nr, 1), "nc2": max(nx + na + 2 * nr, 1),
+        "chol": max(nx * nx, 1) if np_ else 1,
     }
 
 
@@ -119,6 +120,7 @@ def workspace_fields(nq: int, nref: int, nx: int, na: int, nlevels: int, casadi_
         ("excess", "double", n["nr"], "how far the state is beyond each bound's position or velocity limit"),
         ("x", "double", nxa, "the solution"),
         ("x_free", "double", nxa, "the solution without torque limits and bounds (p0 + P x)"),
+        ("chol", "double", n["chol"], "its Cholesky factor"),
         ("lba", "double", n["na"], "the cascade: row bounds (widened when relaxed)"),
         ("uba", "double", n["na"], ""),
         ("nominal", "double", nxa, "every level met"),

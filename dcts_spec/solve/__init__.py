@@ -7,6 +7,8 @@ from .lexicographic import (
     Structure,
     check_bounds,
     solve_lexicographic,
+    unbounded_solution,
 )
 
-__all__ = ["BOUND_TOLERANCE", "DAQP_SETTINGS", "BoundCheck", "Structure", "check_bounds", "solve_lexicographic"]
+__all__ = ["BOUND_TOLERANCE", "DAQP_SETTINGS", "BoundCheck", "Structure", "check_bounds", "solve_lexicographic",
+           "unbounded_solution"]

@@ -84,6 +84,25 @@ def daqp_qp(H, f, A, lower, upper) -> tuple[np.ndarray | None, int]:
     return np.asarray(x, dtype=float), int(flag)
 
 
+def nominal_point(ubx: np.ndarray, structure: Structure) -> np.ndarray:
+    """Every level met (s = 1, scaled: its upper bound; δ = 0), the other variables 0."""
+    nominal = np.zeros(ubx.size)
+    for s, _ in structure.priorities:
+        nominal[s] = ubx[s]
+    return nominal
+
+
+def unbounded_solution(H: np.ndarray, f: np.ndarray, ubx: np.ndarray, structure: Structure) -> np.ndarray:
+    """The lexicographic solution when no row constrains, in closed form: every level met, and the
+    variables after the levels' own (DCTS: z, which have no bounds) minimizing ½xᵀHx + fᵀx:
+    H_zz z = −(f_z + H_z,levels x_levels). What an over-constrained lowest level's scaling is
+    reported against (`Controller`); one small Cholesky instead of a QP."""
+    x = nominal_point(ubx, structure)
+    first = max((max([s, *bend]) for s, bend in structure.priorities), default=-1) + 1
+    x[first:] = -np.linalg.solve(H[first:, first:], f[first:] + H[first:, :first] @ x[:first])
+    return x
+
+
 class Cascade:
     """The stages of one lexicographic solve on numeric (scaled) QP data."""
 
@@ -93,10 +112,7 @@ class Cascade:
         self.lba, self.uba = lba.copy(), uba.copy()
         self.structure = structure
         self.relaxed_point: np.ndarray | None = None  # set by relax
-        nominal = np.zeros(lbx.size)
-        for s, _ in structure.priorities:
-            nominal[s] = ubx[s]  # s = 1 (scaled)
-        self.nominal = nominal
+        self.nominal = nominal_point(ubx, structure)
 
     def _solve(self, H, f, lbx, ubx) -> np.ndarray | None:
         lower, upper = np.concatenate([lbx, self.lba]), np.concatenate([ubx, self.uba])
