@@ -17,6 +17,7 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
+from .buffered_function import BufferedFunction
 from .formulations import FORMULATIONS, ControlLaw, ControlProblem, build_problem
 from .formulations.fallback import fallback_torque
 from .formulations.parameters import ParameterLayout
@@ -140,6 +141,7 @@ class Controller:
         self.problem = build_problem(spec, robot)
         self.law = FORMULATIONS[self.formulation](self.problem)
         self.data = data_function(self.problem, self.law)
+        self._data_buffer: BufferedFunction | None = None
         fallback = fallback_torque(self.problem)
         p = self.problem
         self.fallback_function = ca.Function("fallback", [p.q, p.dq, p.param], [fallback], ["q", "dq", "param"], ["tau"])
@@ -266,11 +268,15 @@ class Controller:
         """The QP data and output maps at a state (for tests and tools); `param` defaults to the
         values of the last step."""
         param = self._ramp.now if param is None else np.asarray(param, dtype=float).reshape(-1)
-        return self._evaluate(*self._inputs(q, dq, tau_ext, ref), param)
+        data = self._evaluate(*self._inputs(q, dq, tau_ext, ref), param)
+        return {name: value.copy() for name, value in data.items()}
 
     def _evaluate(self, q: np.ndarray, dq: np.ndarray, tau_ext: np.ndarray, ref: np.ndarray,
                   param: np.ndarray) -> dict[str, np.ndarray]:
-        return {name: np.array(v) for name, v in zip(DATA_OUTPUTS, self.data(q, dq, tau_ext, ref, param))}
+        """The QP data in arrays the next evaluation overwrites (evaluate_data copies them)."""
+        if self._data_buffer is None:  # set up at the first step: building a controller stays cheap
+            self._data_buffer = BufferedFunction(self.data)
+        return self._data_buffer(q, dq, tau_ext, ref, param)
 
     def _inputs(self, q, dq, tau_ext, ref) -> tuple[np.ndarray, ...]:
         q = np.asarray(q, dtype=float).reshape(-1)
