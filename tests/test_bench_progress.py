@@ -27,11 +27,13 @@ def test_bench_announces_each_stage(monkeypatch: pytest.MonkeyPatch, tmp_path: P
     controller = SimpleNamespace(robot=robot, problem=SimpleNamespace(levels=[]), ref_size=0,
                                  step=lambda *args: None)
     manifest = {"name": "minimal", "formulation": "dcts", "nq": robot.nv, "nref": 0, "nx": 0, "na": 0,
-                "nlevels": 2, "workspace_bytes_host": 0, "qp_data_instructions": 0}
+                "nlevels": 2, "workspace_bytes_host": 0, "qp_data_instructions": 0,
+                "host": {"compiler": "cc", "build_dir": "build"}}
     c_times = {"step": {"median_us": 1.0}}
     stand_ins = {
         "make_controller": lambda spec, formulation: controller,
-        "compile_bundle": lambda spec, directory, formulation, build_timeout: SimpleNamespace(manifest=manifest),
+        "compile_bundle": lambda spec, directory, formulation, build_timeout: SimpleNamespace(manifest=manifest,
+                                                                                              cost=None),
         "load_bundle": lambda directory: contextlib.nullcontext(SimpleNamespace(step=None)),
         "trajectory_states": lambda controller, n, seed, step: [state] * n,
         "StateSampler": lambda controller, seed: SimpleNamespace(mixed=lambda n, limit_fraction: [state] * n),
@@ -39,6 +41,8 @@ def test_bench_announces_each_stage(monkeypatch: pytest.MonkeyPatch, tmp_path: P
         "run_c_harness": lambda *args: c_times,
         "callgrind_instructions": lambda *args: 1.0,
         "object_sizes": lambda *args: {},
+        "c_source_bytes": lambda *args: 0,
+        "build_firmware": lambda *args, **kwargs: {"flash_bytes": 1},
         "_cmeel_prefix": lambda: None,  # Pinocchio timed from Python: no C++ harness to build
     }
     for name, stand_in in stand_ins.items():

@@ -1,7 +1,7 @@
 """`dcts bench`: time the generated C controller, the Python runtime and Pinocchio's dynamics.
 
-The C controller is timed by a C harness (no Python in the loop), compiled with -O2
--march=native, over states along closed-loop motions (the order a control loop sees, so the
+The C controller is timed by a C harness (no Python in the loop) linked with the bundle's own
+objects, built as its Makefile builds them (codegen/flags.py), over states along closed-loop motions (the order a control loop sees, so the
 history the workspace keeps is realistic) and over independent random states. Pinocchio's numeric dynamics
 terms (computeAllTerms + the task frames' Jacobians) on the same states are the reference a
 hand-written controller would start from.
@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import hashlib
 import os
+import shlex
 import shutil
 import subprocess
 import tempfile
@@ -25,15 +26,13 @@ from ..controller import STATUS_NAMES
 from ..phases import phase
 from ..spec import load_spec
 from ..tasks.cartesian import CartesianTask
-from .build import CACHE_DIR, compile_bundle, make_controller, section_size
+from .build import CACHE_DIR, build_firmware, compile_bundle, make_controller, section_size
+from .flags import C_WARNINGS, HOST_OPTIMIZATION, flags_text
 from .process import run, tail
 from .bundle import CodegenError, render, template, version
 from .layout import casadi_work_lengths
 from .loader import load_bundle
 from .states import State, StateSampler, trajectory_states
-
-NATIVE = ["-O2", "-march=native"]
-
 
 def _write_states(path: Path, states: list[State]) -> None:
     rows = np.array([np.concatenate([s.q, s.dq, s.tau_ext, s.ref]) for s in states], dtype=np.float64)
@@ -48,12 +47,9 @@ def _stats(ns: np.ndarray) -> dict[str, float]:
             "mean_us": float(us.mean())}
 
 
-def _cc() -> str:
-    return os.environ.get("CC") or ("gcc" if shutil.which("gcc") else "cc")
-
-
-def build_c_harness(bundle: Path, manifest: dict, work: Path, optimization: list[str] = NATIVE, suffix: str = "") -> Path:
-    """The bench harness with the controller sources, all compiled with `optimization`."""
+def build_c_harness(bundle: Path, manifest: dict, work: Path) -> Path:
+    """The bench harness, compiled as the bundle's Makefile compiles its sources and linked with
+    the bundle's objects: the timed code is the code that ships."""
     name = manifest["name"]
     values = {
         "name": name, "NAME": name.upper(), "VERSION": version(),
@@ -61,14 +57,15 @@ def build_c_harness(bundle: Path, manifest: dict, work: Path, optimization: list
     }
     source = work / f"{name}_bench.c"
     source.write_text(render(template("bench.c.in"), values))
-    exe = work / f"{name}_bench{suffix}"
-    flags = ["-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", *optimization]
+    exe = work / f"{name}_bench"
+    objects = bundle / manifest["host"]["build_dir"]
+    flags = [*C_WARNINGS, *HOST_OPTIMIZATION, f"-I{bundle}"]
     daqp = []
-    if manifest["nx"]:  # the bundle's own DAQP objects, built with the flags it ships
+    if manifest["nx"]:
         flags.append(f"-I{bundle / 'daqp' / 'include'}")
-        daqp = [str(o) for o in sorted((bundle / manifest["host"]["build_dir"] / "daqp").glob("*.o"))]
-    run([_cc(), *flags, f"-I{bundle}", "-o", str(exe), str(source), str(bundle / f"{name}.c"),
-         str(bundle / f"{name}_casadi.c"), *daqp, "-lm"], work, "bench harness build")
+        daqp = [str(o) for o in sorted((objects / "daqp").glob("*.o"))]
+    run([*shlex.split(manifest["host"]["compiler"]), *flags, "-o", str(exe), str(source), str(objects / f"{name}.o"),
+         str(objects / f"{name}_casadi.o"), *daqp, "-lm"], work, "bench harness build")
     return exe
 
 
@@ -206,7 +203,7 @@ def python_runtime(controller, states: list[State]) -> dict:
 
 
 def object_sizes(bundle: Path, manifest: dict, work: Path) -> dict:
-    """.text of the controller's objects (-O2 -fPIC as in the bundle) and of the shared library."""
+    """.text of the controller's objects (as the bundle builds them) and of the shared library."""
     name = manifest["name"]
     sizes = {}
     for stem in (name, f"{name}_casadi"):
@@ -216,6 +213,11 @@ def object_sizes(bundle: Path, manifest: dict, work: Path) -> dict:
     lib = bundle / manifest["library"]
     sizes[lib.name] = section_size(lib)
     return sizes
+
+
+def c_source_bytes(bundle: Path, manifest: dict) -> int:
+    """Bytes of the controller's C sources (the step and the CasADi-generated QP data)."""
+    return sum((bundle / f"{manifest['name']}{suffix}.c").stat().st_size for suffix in ("", "_casadi"))
 
 
 def bench(spec_file: str | Path, formulation: str | None = None, states: int = 10000, python_states: int = 500,
@@ -231,7 +233,8 @@ def bench(spec_file: str | Path, formulation: str | None = None, states: int = 1
     with tempfile.TemporaryDirectory(prefix="dcts-bench-") as tmp:
         work = Path(tmp)
         bundle = work / "bundle"
-        manifest = compile_bundle(spec, bundle, formulation=formulation, build_timeout=build_timeout).manifest
+        built = compile_bundle(spec, bundle, formulation=formulation, build_timeout=build_timeout)
+        manifest = built.manifest
         t0 = time.perf_counter()
         phase(f"generating {states} closed-loop states (the C step in the loop)")
         with load_bundle(bundle) as compiled:
@@ -240,8 +243,8 @@ def bench(spec_file: str | Path, formulation: str | None = None, states: int = 1
         independent = StateSampler(controller, seed + 1).mixed(states, limit_fraction=0.15)
         generation_s = time.perf_counter() - t0
 
-        phase(f"timing the C step ({' '.join(NATIVE)}) on the closed-loop, then the independent states, best of "
-              f"{REPEATS} runs each")
+        phase(f"timing the C step (the bundle's build, {flags_text(HOST_OPTIMIZATION)}) on the closed-loop, then "
+              f"the independent states, best of {REPEATS} runs each")
         exe = build_c_harness(bundle, manifest, work)
         c_traj = run_c_harness(exe, along, work, "trajectory")
         c_rand = run_c_harness(exe, independent, work, "random")
@@ -253,10 +256,12 @@ def bench(spec_file: str | Path, formulation: str | None = None, states: int = 1
         if shutil.which("valgrind") is not None:
             counted = along[: min(callgrind_states, len(along))]
             phase(f"counting the instructions of a step with callgrind ({len(counted)} states)")
-            # valgrind does not decode every -march=native instruction (AVX-512): count on baseline x86-64
-            baseline = build_c_harness(bundle, manifest, work, ["-O2"], "_baseline")
-            instructions = callgrind_instructions(baseline, counted, work, manifest["name"])
+            instructions = callgrind_instructions(exe, counted, work, manifest["name"])
         sizes = object_sizes(bundle, manifest, work)
+        source_bytes = c_source_bytes(bundle, manifest)
+        firmware = None
+        if shutil.which("arm-none-eabi-gcc") is not None:  # the flash a microcontroller needs (issue 16: <= 64 kB)
+            firmware = build_firmware(bundle, manifest, qemu=False, timeout=build_timeout)
 
     host = manifest.get("host", {})
     result = {
@@ -265,7 +270,10 @@ def bench(spec_file: str | Path, formulation: str | None = None, states: int = 1
         "formulation": manifest["formulation"],
         "sizes": {"nq": manifest["nq"], "nref": manifest["nref"], "nx": manifest["nx"], "na": manifest["na"],
                   "nlevels": manifest["nlevels"]},
-        "compiler": f"{_cc()} {' '.join(NATIVE)}",
+        "compiler": f"{host['compiler']} {flags_text(HOST_OPTIMIZATION)} (the bundle's Makefile)",
+        "build": built.cost.to_dict() if built.cost else None,
+        "c_source_bytes": source_bytes,
+        "cortex_m7": firmware,
         "c_step": {"trajectory": c_traj, "random": c_rand},
         "python_step": py,
         "pinocchio_terms": pin_ref,
@@ -313,10 +321,17 @@ def format_report(r: dict) -> str:
         f"at most {c['qp_solves_max']} solves per step; statuses {c['statuses']}",
         f"workspace {r['workspace_bytes']} bytes (DAQP's arrays {r['daqp_workspace_bytes']} of them), "
         f"heap calls {r['heap_calls']} (init and step; `make nomalloc`)",
-        ".text bytes: " + ", ".join(f"{k} {v}" for k, v in r["text_bytes"].items()),
+        ".text bytes: " + ", ".join(f"{k} {v}" for k, v in r["text_bytes"].items())
+        + f"; C source {r['c_source_bytes']} bytes",
         "instructions per step (callgrind): "
-        + (f"{r['instructions_per_step']:.0f} (-O2, baseline x86-64)" if r["instructions_per_step"]
+        + (f"{r['instructions_per_step']:.0f} (the bundle's build)" if r["instructions_per_step"]
            else "valgrind not installed"),
     ]
+    if r.get("build"):
+        lines.append(f"compile (make all): {r['build']['seconds']:.1f} s, peak memory of a build process "
+                     f"{r['build']['peak_rss_bytes'] / 1e6:.0f} MB")
+    fw = r.get("cortex_m7")
+    lines.append(f"cortex-m7 flash {fw['flash_bytes']} bytes (text+data; target 65536), RAM {fw['ram_bytes']} bytes"
+                 if fw else "cortex-m7: arm-none-eabi-gcc not installed")
     return "\n".join(lines)
 

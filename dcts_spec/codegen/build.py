@@ -10,12 +10,14 @@ import hashlib
 import json
 import os
 import re
+import resource
 import shlex
 import shutil
 import subprocess
 import sys
 import tarfile
 import tempfile
+import time
 from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
@@ -120,6 +122,19 @@ def _remove_created(created: list[Path]) -> None:
 
 
 @dataclass
+class BuildCost:
+    """What compiling the host library and test (`make all`) took: its wall time, and the peak
+    resident memory of any child process of this process so far (getrusage(RUSAGE_CHILDREN);
+    in a fresh process, as `scripts/bench_sizes.py` runs it, that of the compiler)."""
+
+    seconds: float
+    peak_rss_bytes: int
+
+    def to_dict(self) -> dict:
+        return {"seconds": self.seconds, "peak_rss_bytes": self.peak_rss_bytes}
+
+
+@dataclass
 class BuildReport:
     """What compile_bundle did; `lines()` is what `dcts compile` prints."""
 
@@ -129,6 +144,7 @@ class BuildReport:
     test_output: str = ""
     firmware: dict | None = None
     notes: list[str] = field(default_factory=list)
+    cost: BuildCost | None = None
 
     def lines(self) -> list[str]:
         m = self.manifest
@@ -142,6 +158,9 @@ class BuildReport:
                        f"workspace {m['workspace_bytes_host']} bytes (DAQP's {m['daqp_workspace_bytes']} included), "
                        f"no heap (`make nomalloc` passed)")
             out.append(f"  golden test    {host.get('test_summary', '')}")
+            if self.cost:
+                out.append(f"  compile        {self.cost.seconds:.0f} s (make all), peak memory of a build process "
+                           f"{self.cost.peak_rss_bytes / 1e6:.0f} MB")
         else:
             out.append("  sources only (--no-build): run `make && make check` in the directory")
         if self.firmware:
@@ -262,15 +281,19 @@ def _keep_daqp_objects(directory: Path, build: str) -> None:
         shutil.rmtree(staging, ignore_errors=True)
 
 
-def build_host(directory: Path, manifest: dict, cc: str | None = None, timeout: float | None = None) -> dict:
+def build_host(directory: Path, manifest: dict, cc: str | None = None,
+               timeout: float | None = None) -> tuple[dict, BuildCost]:
     """Build the host library and the test with `make`, run the test, and again linked with a
-    malloc that aborts (`make nomalloc`: neither init nor step may reach the heap)."""
+    malloc that aborts (`make nomalloc`: neither init nor step may reach the heap). Returns the
+    manifest's `host` record and what the build took."""
     phase("compiling C and running the golden-vector test")
     variables = {"CC": cc} if cc else {}
     compiler = cc or os.environ.get("CC", "cc")
     build, _ = build_dirs(directory, variables)
     _reuse_daqp_objects(directory, build)
+    start = time.monotonic()
     make(directory, ["all"], "host build", variables, timeout)
+    cost = BuildCost(time.monotonic() - start, resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss * 1024)
     _keep_daqp_objects(directory, build)
     test = make(directory, ["check"], "golden-vector test", variables, timeout)
     make(directory, ["nomalloc"], "golden-vector test with a malloc that aborts", variables, timeout)
@@ -285,7 +308,7 @@ def build_host(directory: Path, manifest: dict, cc: str | None = None, timeout: 
         "step_heap_calls": 0,
         "text_bytes": section_size(lib),
         "library_bytes": lib.stat().st_size,
-    }
+    }, cost
 
 
 def build_firmware(directory: Path, manifest: dict, qemu: bool = True, timeout: float | None = None) -> dict:
@@ -410,7 +433,7 @@ def compile_bundle(
         manifest = sources.manifest
         report = BuildReport(out_dir, manifest, build)
         if build:
-            manifest["host"] = build_host(tmp, manifest, cc, build_timeout)
+            manifest["host"], report.cost = build_host(tmp, manifest, cc, build_timeout)
             manifest["built"] = True
         if target == "cortex-m7":
             report.firmware = manifest["cortex_m7"] = build_firmware(tmp, manifest, qemu=qemu, timeout=build_timeout)

@@ -31,6 +31,7 @@ from .layout import (C_DATA_OUTPUTS, array_lengths, casadi_work_lengths, daqp_st
                      workspace_struct)
 from .datasheet import (conventions_text, fmt_list, gains_text, limits_text, model_texts, parameters_doc_text,
                         parameters_struct, parameters_text, ref_layout_text, sizes_text, status_text, timing_text)
+from .flags import C_WARNINGS, HOST_OPTIMIZATION, flags_text
 from .model import model_record
 from .spec_copy import copy_spec
 from .states import State, golden_states
@@ -487,6 +488,8 @@ def generate_sources(
         **_parameter_values(controller, name, big),
         "DAMPING_ARRAY": c_array(damping),
         "NEEDS_DAQP": int(nx > 0),
+        "HOST_OPTIMIZATION": flags_text(HOST_OPTIMIZATION),
+        "C_WARNINGS": flags_text(C_WARNINGS),
         **_golden_tolerances(controller.formulation),
     }
     files = {
