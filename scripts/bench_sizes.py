@@ -1,0 +1,197 @@
+"""How the generated controller grows with the number of joints: the README's "Scaling" table.
+
+For fixed-base models of example-robot-data (joints locked as listed), each with one pose task
+(position and orientation) per arm at priority 1 and a posture at priority 2 under the URDF's
+joint position, velocity and torque limits, this writes a spec, runs `dcts bench --json` on it
+in a fresh process (so the peak memory of its child processes is that of its compiler) and
+prints a markdown table: QP-data operations, C source, the QP data's host .text, compile time and the
+compiler's peak memory, the C step's median and p99 on closed-loop states, its ratio to
+Pinocchio's computeAllTerms timed in the same run, and the Cortex-M7 flash (when
+arm-none-eabi-gcc is installed).
+
+    python scripts/bench_sizes.py                      # every model (the 28-joint one compiles ~1 min)
+    python scripts/bench_sizes.py iiwa14 baxter14      # some of them
+    python scripts/bench_sizes.py --out table.md --json sizes.json --states 3000
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import json
+import os
+import subprocess
+import sys
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+
+from dcts_spec.robot.builtin import example_robot_data_dir, lock_joints
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+@dataclass(frozen=True)
+class Model:
+    """A robot of example-robot-data with the joints the controller drives and its arms' frames."""
+
+    key: str
+    label: str
+    urdf: str  # relative to example-robot-data's robots/ folder
+    keep: tuple[str, ...]  # joint-name prefixes that stay free; every other joint is locked
+    arm_frames: tuple[str, ...]
+
+
+TALOS_ARMS = ("arm_left_", "arm_right_")
+TALOS_FRAMES = ("gripper_left_base_link", "gripper_right_base_link")
+MODELS = (
+    Model("baxter14", "Baxter, both arms", "baxter_description/urdf/baxter.urdf", ("left_", "right_"),
+          ("left_gripper", "right_gripper")),
+    Model("talos16", "TALOS torso + arms", "talos_data/robots/talos_reduced.urdf", ("torso_", *TALOS_ARMS),
+          TALOS_FRAMES),
+    Model("talos28", "TALOS, arms, torso and legs", "talos_data/robots/talos_reduced.urdf",
+          ("torso_", *TALOS_ARMS, "leg_"), TALOS_FRAMES),
+)
+BENCH_SPEC = ROOT / "specs" / "bench_iiwa14.yaml"  # the 7-joint row: `dcts bench`'s own spec
+TORQUE_MARGIN = 2.0
+KEYS = ("iiwa14", *(m.key for m in MODELS))
+
+
+def model_spec(model: Model) -> str:
+    """The spec: all joints but the kept ones locked at the middle of their range; references are
+    the arms' frames at the middle of the kept joints' ranges."""
+    urdf = example_robot_data_dir() / model.urdf
+    full = pin.buildModelFromUrdf(str(urdf))
+    middle = (full.lowerPositionLimit + full.upperPositionLimit) / 2
+    names = list(full.names)[1:]
+    kept = [n for n in names if n.startswith(model.keep)]
+    locked = {n: float(middle[full.joints[full.getJointId(n)].idx_q]) for n in names if n not in kept}
+    reduced = lock_joints(full, locked)
+    q0 = (reduced.lowerPositionLimit + reduced.upperPositionLimit) / 2
+    data = reduced.createData()
+    pin.framesForwardKinematics(reduced, data, q0)
+    tasks = []
+    for frame in model.arm_frames:
+        pose = data.oMf[reduced.getFrameId(frame)]
+        rpy = pin.rpy.matrixToRpy(pose.rotation)
+        tasks.append(f"""  - name: {frame}_pose
+    type: pose
+    frame: {frame}
+    priority: 1
+    gains: {{kp: 100, kd: 20}}
+    reference: {{position: {_list(pose.translation)}, rpy: {_list(rpy)}}}""")
+    tasks.append(f"""  - name: posture
+    type: joint
+    priority: 2
+    gains: {{kp: 10, kd: 6}}
+    reference: {{q: {_list(q0)}}}""")
+    locked_text = ", ".join(f"{n}: {v:.6g}" for n, v in locked.items())
+    # Twice the URDF's torques: at the URDF's (TALOS's wrist: 3 Nm) a fifth of the golden vectors
+    # are relaxed, and there C and Python may settle the barely infeasible level differently.
+    torque = _list(TORQUE_MARGIN * reduced.effortLimit)
+    return f"""version: 1
+name: sizes_{model.key}
+robot:
+  urdf: {urdf}
+  locked_joints: {{{locked_text}}}
+limits:
+  joint_torque: {{max: {torque}, allow_outside_urdf: true}}
+controller:
+  formulation: dcts
+tasks:
+{chr(10).join(tasks)}
+"""
+
+
+def _list(values: np.ndarray) -> str:
+    return "[" + ", ".join(f"{v:.6g}" for v in values) + "]"
+
+
+def bench(spec: Path, states: int, timeout: float) -> dict:
+    """`dcts bench --json` in its own process (its children's peak memory is its compiler's)."""
+    command = [sys.executable, "-c", "from dcts_spec.cli import main; main()", "bench", str(spec), "--json", "--states", str(states),
+               "--python-states", "50", "--build-timeout", str(timeout)]
+    done = subprocess.run(command, capture_output=True, text=True, cwd=ROOT)
+    if done.returncode != 0:
+        raise SystemExit(f"dcts bench {spec} failed:\n{done.stderr[-3000:]}")
+    return json.loads(done.stdout)
+
+
+def row(label: str, r: dict) -> dict:
+    """One line of the table from `dcts bench --json`."""
+    step = r["c_step"]["trajectory"]["step"]
+    build = r["build"]
+    firmware = r.get("cortex_m7") or {}
+    return {
+        "model": label,
+        "dof": r["sizes"]["nq"],
+        "qp_data_operations": r["qp_data_instructions"],
+        "c_source_bytes": r["c_source_bytes"],
+        "text_bytes": r["text_bytes"][f"{r['name']}_casadi.o"],  # the QP data: what grows
+        "compile_s": build["seconds"],
+        "compile_peak_rss_bytes": build["peak_rss_bytes"],
+        "step_median_us": step["median_us"],
+        "step_p99_us": step["p99_us"],
+        "ratio_to_pinocchio": r["ratio_c_step_to_pinocchio"],
+        "cortex_m7_flash_bytes": firmware.get("flash_bytes"),
+        "compiler": r["compiler"],
+    }
+
+
+def markdown(rows: list[dict]) -> str:
+    """The table as in the README."""
+    lines = ["| model | DOF | QP-data operations | C source | QP data `.text` | compile (peak RSS) | C step median / p99 "
+             "| × Pinocchio computeAllTerms (same run) | Cortex-M7 flash |",
+             "|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        flash = f"{r['cortex_m7_flash_bytes'] / 1e3:.0f} kB" if r["cortex_m7_flash_bytes"] else "—"
+        lines.append(
+            f"| {r['model']} | {r['dof']} | {r['qp_data_operations'] / 1e3:.1f} k | {r['c_source_bytes'] / 1e6:.2f} MB "
+            f"| {r['text_bytes'] / 1e3:.0f} kB | {r['compile_s']:.0f} s ({r['compile_peak_rss_bytes'] / 1e9:.2f} GB) "
+            f"| {r['step_median_us']:.1f} / {r['step_p99_us']:.0f} µs | {r['ratio_to_pinocchio']:.2f} | {flash} |")
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("models", nargs="*", metavar="MODEL", help=f"which rows ({', '.join(KEYS)}); default: all")
+    parser.add_argument("--states", type=int, default=5000, help="closed-loop states timed per model")
+    parser.add_argument("--build-timeout", type=float, default=900, help="time-out of each build step, s")
+    parser.add_argument("--out", type=Path, help="write the markdown table here (default: print it)")
+    parser.add_argument("--json", type=Path, help="also write the rows as JSON")
+    parser.add_argument("--specs", type=Path, help="keep the generated specs in this folder")
+    args = parser.parse_args(argv)
+    chosen = args.models or list(KEYS)
+    unknown = [key for key in chosen if key not in KEYS]
+    if unknown:
+        parser.error(f"unknown model {unknown[0]!r}; choose from {', '.join(KEYS)}")
+    rows = []
+    with tempfile.TemporaryDirectory(prefix="dcts-sizes-") as tmp:
+        folder = args.specs or Path(tmp)
+        folder.mkdir(parents=True, exist_ok=True)
+        for key in chosen:
+            if key == "iiwa14":
+                spec, label = BENCH_SPEC, "iiwa14 (bench spec)"
+            else:
+                model = next(m for m in MODELS if m.key == key)
+                spec, label = folder / f"sizes_{key}.yaml", model.label
+                spec.write_text(model_spec(model))
+            print(f"{label}: dcts bench {spec} …", file=sys.stderr, flush=True)
+            rows.append(row(label, bench(spec, args.states, args.build_timeout)))
+            print(markdown(rows[-1:]).splitlines()[-1], file=sys.stderr, flush=True)
+    table = markdown(rows)
+    stamp = f"Measured {datetime.date.today().isoformat()} on {os.cpu_count()} cores, {rows[0]['compiler']}."
+    if args.out:
+        args.out.write_text(f"{table}\n\n{stamp}\n")
+    else:
+        print(f"{table}\n\n{stamp}")
+    if args.json:
+        args.json.write_text(json.dumps(rows, indent=2) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
