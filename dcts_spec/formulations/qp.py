@@ -97,6 +97,9 @@ class ControlLaw:
     # An over-constrained lowest level (least squares, no scaling variable): its task
     # acceleration as (matrix, offset) in x; its scaling is computed after the solve (controller).
     least_squares_task: tuple[ca.SX, ca.SX] | None = None
+    # The actual joint acceleration a(x) = M⁻¹(τ − ν − g + τ_ext), where the formulation has it at
+    # hand (the QP ones): the commanded q̈ is then read from it, not formed again as M⁻¹(M a).
+    acceleration: Affine | None = None
 
     @property
     def nx(self) -> int:

@@ -38,4 +38,4 @@ def weighted_qp(problem: ControlProblem, regularization_hessian: ca.SX, regulari
     acceleration = Affine(ca.SX.zeros(n), ca.SX.eye(n))
     qp, torque = with_limits(problem, acceleration, H, f, [-INF] * n, [INF] * n, [f"a[{j}]" for j in range(n)])
     scaling = Affine.constant(ca.SX.ones(len(problem.levels)), qp.nx)
-    return ControlLaw(torque, scaling, qp)
+    return ControlLaw(torque, scaling, qp, acceleration=acceleration)
