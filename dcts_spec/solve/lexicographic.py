@@ -31,6 +31,7 @@ The generated C code runs the same cascade on the same DAQP.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import daqp
@@ -41,6 +42,7 @@ import numpy as np
 DAQP_SETTINGS = {"primal_tol": 1e-8, "iter_limit": 1000, "eq_reduction": -1}
 DAQP_INF = 1e30  # DAQP's "no bound"
 DAQP_EQUALITY = 5  # sense: active and immutable
+_SENSE_EQUALITY, _SENSE_INEQUALITY = np.intc(DAQP_EQUALITY), np.intc(0)  # (np.where then gives DAQP's type)
 # The proximal-point stages (see Cascade._proximal): step ρ, at most this many solves, and when
 # a step is small enough (relative) to stop. The scaling's objective is linear: its Hessian stays
 # the identity whatever ρ, and a long step reaches the largest scaling at once. The bend's
@@ -71,15 +73,20 @@ class Structure:
     priorities: tuple[tuple[int, tuple[int, ...]], ...]
 
 
+def clip_to_daqp(values: np.ndarray, out: np.ndarray) -> None:
+    """`values` within DAQP's ±DAQP_INF, written into `out`: np.clip's numbers without its
+    Python-level overhead (the cascade clips the variable bounds of every QP)."""
+    np.minimum(np.maximum(values, -DAQP_INF, out=out), DAQP_INF, out=out)
+
+
 def daqp_qp(H, f, A, lower, upper) -> tuple[np.ndarray | None, int]:
-    """One ordinary QP: min ½xᵀHx + fᵀx, lower ≤ [x; Ax] ≤ upper (equal ends: an equality).
-    Returns x (None if DAQP found no solution) and its exit flag."""
-    lower = np.clip(lower, -DAQP_INF, DAQP_INF)
-    upper = np.clip(upper, -DAQP_INF, DAQP_INF)
-    sense = np.where(lower == upper, DAQP_EQUALITY, 0).astype(np.intc)
+    """One ordinary QP: min ½xᵀHx + fᵀx, lower ≤ [x; Ax] ≤ upper (equal ends: an equality), the
+    bounds within ±DAQP_INF (`clip_to_daqp`). Returns x (None if DAQP found no solution) and its
+    exit flag."""
+    sense = np.where(lower == upper, _SENSE_EQUALITY, _SENSE_INEQUALITY)
     x, _, flag, _ = daqp.solve(np.ascontiguousarray(H), np.ascontiguousarray(f), np.ascontiguousarray(A),
                                upper, lower, sense, **DAQP_SETTINGS)
-    if flag != 1 or not np.all(np.isfinite(x)):
+    if flag != 1 or not np.isfinite(x).all():
         return None, int(flag)
     return np.asarray(x, dtype=float), int(flag)
 
@@ -113,16 +120,30 @@ class Cascade:
         self.structure = structure
         self.relaxed_point: np.ndarray | None = None  # set by relax
         self.nominal = nominal_point(ubx, structure)
+        # DAQP's bounds of [x; Ax], clipped: the rows' part is set once (and after `relax`), the
+        # variables' part by each QP
+        self._lower, self._upper = np.empty(lbx.size + lba.size), np.empty(lbx.size + lba.size)
+        self._set_row_bounds()
+
+    def _set_row_bounds(self) -> None:
+        nx = self.lbx.size
+        clip_to_daqp(self.lba, self._lower[nx:])
+        clip_to_daqp(self.uba, self._upper[nx:])
 
     def _solve(self, H, f, lbx, ubx) -> np.ndarray | None:
-        lower, upper = np.concatenate([lbx, self.lba]), np.concatenate([ubx, self.uba])
+        """One QP with the variable bounds lbx/ubx: DAQP's answer, if it holds on its own rows."""
+        lower, upper = self._lower, self._upper
+        clip_to_daqp(lbx, lower[: lbx.size])
+        clip_to_daqp(ubx, upper[: ubx.size])
         x, _ = daqp_qp(H, f, self.A, lower, upper)
         if x is None:
             return None
         value = np.concatenate([x, self.A @ x])
-        with np.errstate(invalid="ignore"):
-            excess = np.maximum(lower - value, value - upper) / np.maximum(1.0, np.minimum(np.abs(lower), np.abs(upper)))
-        return x if not np.any(excess > FEASIBILITY_TOLERANCE) else None
+        # On the clipped bounds: the same excess as on the infinite ones (x and Ax are far below
+        # 1e30), and no ∞ − ∞ to guard against
+        excess = np.maximum(lower - value, value - upper)
+        excess /= np.maximum(1.0, np.minimum(np.abs(lower), np.abs(upper)))
+        return None if (excess > FEASIBILITY_TOLERANCE).any() else x
 
     def final(self, upto: int, lbx, ubx) -> np.ndarray | None:
         """½xᵀHx + fᵀx with the levels [0, upto) as they are in lbx/ubx and the others nominal."""
@@ -151,16 +172,19 @@ class Cascade:
 
     def _proximal_steps(self, weights, linear, rho, step, lbx, ubx) -> np.ndarray | None:
         center, x = self.nominal, None
-        linear_only = not weights.any()
+        best_bounds = None if weights.any() else self._best_bounds(linear, lbx, ubx)
         seen = (weights != 0.0) | (linear != 0.0)
+        hessian, hessian_rho = None, None
         for _ in range(PROXIMAL_ITERATIONS):
-            solved = self._solve(np.diag(1.0 + weights / rho), linear / rho - center, lbx, ubx)
+            if rho != hessian_rho:  # (ρ stays at `step` once there: the same Hessian)
+                hessian, hessian_rho = np.diag(1.0 + weights / rho), rho
+            solved = self._solve(hessian, linear / rho - center, lbx, ubx)
             if solved is None:
                 return x
             previous, x = x, solved
             if self._negligible(x - center, x):
                 return x
-            if linear_only and self._at_best_bounds(x, linear, lbx, ubx):
+            if best_bounds is not None and self._at_best_bounds(x, *best_bounds):
                 return x
             center = x
             # two iterates on the same face: move along it, as long as the objective's variables
@@ -174,15 +198,21 @@ class Cascade:
 
     @staticmethod
     def _negligible(step: np.ndarray, x: np.ndarray) -> bool:
-        return bool(np.linalg.norm(step) <= PROXIMAL_TOLERANCE * (1.0 + np.linalg.norm(x)))
+        # ‖·‖ as np.linalg.norm computes it (√(v·v)), without its Python-level overhead
+        return math.sqrt(step.dot(step)) <= PROXIMAL_TOLERANCE * (1.0 + math.sqrt(x.dot(x)))
 
     @staticmethod
-    def _at_best_bounds(x, linear, lbx, ubx) -> bool:
-        """Is x at the bound each variable of a linear objective is pushed toward?"""
-        up, down = linear < 0, linear > 0
+    def _best_bounds(linear, lbx, ubx) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """For a linear objective: the variables it pushes up and down, and how close to their
+        upper and lower bounds they count as there (a stage's bounds stay the same)."""
+        up, down = np.flatnonzero(linear < 0), np.flatnonzero(linear > 0)
         tol = PROXIMAL_TOLERANCE
-        return bool(np.all(x[up] >= ubx[up] - tol * (1.0 + np.abs(ubx[up])))
-                    and np.all(x[down] <= lbx[down] + tol * (1.0 + np.abs(lbx[down]))))
+        return up, ubx[up] - tol * (1.0 + np.abs(ubx[up])), down, lbx[down] + tol * (1.0 + np.abs(lbx[down]))
+
+    @staticmethod
+    def _at_best_bounds(x, up, upper, down, lower) -> bool:
+        """Is x at the bound each variable of a linear objective is pushed toward?"""
+        return bool((x[up] >= upper).all() and (x[down] <= lower).all())
 
     def _extrapolation(self, x, d, weights, linear, lbx, ubx) -> float:
         """The largest t ≥ 0 keeping x + t d feasible, capped at the minimum of φ along it. The
@@ -304,6 +334,7 @@ class Cascade:
         # the stages below cross it)
         self.lba[rows.start : rows.stop] = np.where(value < lo - margin, value - margin, lo)
         self.uba[rows.start : rows.stop] = np.where(value > hi + margin, value + margin, hi)
+        self._set_row_bounds()
         return True
 
 
