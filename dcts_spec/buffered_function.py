@@ -22,7 +22,9 @@ class BufferedFunction:
     """`function` (dense inputs and outputs) called on numpy arrays.
 
     A call returns the same dict of output arrays every time, overwritten by the next call: a
-    caller that keeps a value past that copies it. Not for several threads at once."""
+    caller that keeps a value past that copies it. The outputs lie one after the other in one
+    array, so that consecutive ones can be checked at once (`span`). Not for several threads at
+    once."""
 
     def __init__(self, function: ca.Function):
         for kind, count, sparsity in (("input", function.n_in(), function.sparsity_in),
@@ -35,13 +37,20 @@ class BufferedFunction:
                                  [ca.transpose(out) for out in function.call(symbols)])
         self._buffer, self._evaluate = transposed.buffer()
         self._inputs = [np.zeros(function.nnz_in(i)) for i in range(function.n_in())]
-        flat_outputs = [np.zeros(function.nnz_out(i)) for i in range(function.n_out())]
+        ends = np.cumsum([0] + [function.nnz_out(i) for i in range(function.n_out())])
+        self._block = np.zeros(ends[-1])
+        flat_outputs = [self._block[ends[i]:ends[i + 1]] for i in range(function.n_out())]
+        self._ends = {function.name_out(i): (int(ends[i]), int(ends[i + 1])) for i in range(function.n_out())}
         for i, array in enumerate(self._inputs):
             self._buffer.set_arg(i, memoryview(array))
         for i, array in enumerate(flat_outputs):
             self._buffer.set_res(i, memoryview(array))
         self.outputs = {function.name_out(i): array.reshape(function.size_out(i))
                         for i, array in enumerate(flat_outputs)}
+
+    def span(self, first: str, last: str) -> np.ndarray:
+        """The outputs `first` to `last` (in the function's order), flat, as one array (a view)."""
+        return self._block[self._ends[first][0]:self._ends[last][1]]
 
     def __call__(self, *inputs: np.ndarray) -> dict[str, np.ndarray]:
         for target, value in zip(self._inputs, inputs, strict=True):

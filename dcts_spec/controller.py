@@ -151,6 +151,9 @@ class Controller:
         self.fallback_function = ca.Function("fallback", [p.q, p.dq, p.param], [fallback], ["q", "dq", "param"], ["tau"])
         self.tau_max = np.asarray(robot.limits.tau_max, dtype=float)  # as compiled (the envelope)
         self.reset_params()
+        # the joints whose torque limit is a run-time parameter, and where it is in `param`
+        self._torque_joints = np.array([j for j, i in enumerate(self.param_layout.torque_index) if i >= 0], dtype=int)
+        self._torque_params = np.array([i for i in self.param_layout.torque_index if i >= 0], dtype=int)
         self._last_q: np.ndarray | None = None
         qp = self.law.qp
         self._structure = None if qp is None else Structure(
@@ -226,9 +229,7 @@ class Controller:
     def torque_limit(self, param: np.ndarray) -> np.ndarray:
         """|τ| ≤ this with the parameter values `param` (the compiled limit where there is none)."""
         out = self.tau_max.copy()
-        for j, index in enumerate(self.param_layout.torque_index):
-            if index >= 0:
-                out[j] = param[index]
+        out[self._torque_joints] = param[self._torque_params]
         return out
 
     # -- running ---------------------------------------------------------------------------------
@@ -304,14 +305,15 @@ class Controller:
         parameter change one period along its ramp (also a step that falls back)."""
         q, dq, tau_ext, ref = self._inputs(q, dq, tau_ext, ref)
         param = self._ramp.advance()
-        if not all(np.all(np.isfinite(v)) for v in (q, dq, tau_ext, ref)):
+        if not np.isfinite(np.concatenate((q, dq, tau_ext, ref))).all():
             return self._fallback(q, dq, STATUS_NONFINITE_INPUT, np.zeros(0))
         self._last_q = q
         data = self._evaluate(q, dq, tau_ext, ref, param)
         x = np.zeros(0)
         if self.nx:
-            finite = all(np.all(np.isfinite(data[k])) for k in ("H", "f", "A")) and not any(
-                np.any(np.isnan(data[k])) for k in ("lba", "uba", "lbx", "ubx"))
+            # H, f, A and the bounds are consecutive outputs: two checks instead of seven
+            buffer = self._data_buffer
+            finite = np.isfinite(buffer.span("H", "A")).all() and not np.isnan(buffer.span("lba", "ubx")).any()
             solution = self._solve(data) if finite else None
             if solution is None:
                 return self._fallback(q, dq, STATUS_SOLVER_FAILED, np.zeros(0))
@@ -319,8 +321,8 @@ class Controller:
         tau = data["tau0"].ravel() + data["T"] @ x
         tau_max = self.torque_limit(param)
         tolerance = TORQUE_TOLERANCE * np.maximum(1.0, np.where(np.isfinite(tau_max), tau_max, 1.0))
-        out_of_limits = self.law.enforces_torque_limits and np.any(np.abs(tau) > tau_max + tolerance)
-        if not np.all(np.isfinite(tau)) or out_of_limits:
+        out_of_limits = self.law.enforces_torque_limits and (np.abs(tau) > tau_max + tolerance).any()
+        if not np.isfinite(tau).all() or out_of_limits:
             return self._fallback(q, dq, STATUS_INVALID_OUTPUT, x)
         status, relaxed = STATUS_OK, []
         if self.nx:
@@ -329,10 +331,11 @@ class Controller:
             if crossed:
                 status, relaxed = STATUS_LIMITS_RELAXED, [self.bound_names[i] for i in sorted(crossed)]
         ddq = data["ddq0"].ravel() + data["Q"] @ x
-        scaling = np.clip(data["s0"].ravel() + data["S"] @ x, 0.0, 1.0)
+        # (np.minimum/np.maximum: np.clip's numbers, without its Python-level overhead)
+        scaling = np.minimum(np.maximum(data["s0"].ravel() + data["S"] @ x, 0.0), 1.0)
         if self.law.least_squares_task is not None:
             scaling[-1] = self._least_squares_scaling(data, x)
-        return StepResult(np.clip(tau, -tau_max, tau_max), ddq, scaling, status, x, relaxed)
+        return StepResult(np.minimum(np.maximum(tau, -tau_max), tau_max), ddq, scaling, status, x, relaxed)
 
 
 def build_controller(spec: Spec | str | Path, formulation: str | None = None) -> Controller:
