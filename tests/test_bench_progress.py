@@ -34,7 +34,7 @@ def test_bench_announces_each_stage(monkeypatch: pytest.MonkeyPatch, tmp_path: P
         "make_controller": lambda spec, formulation: controller,
         "compile_bundle": lambda spec, directory, formulation, build_timeout: SimpleNamespace(manifest=manifest,
                                                                                               cost=None),
-        "load_bundle": lambda directory: contextlib.nullcontext(SimpleNamespace(step=None)),
+        "load_bundle": lambda directory: contextlib.nullcontext(SimpleNamespace(step=lambda *args: None)),
         "trajectory_states": lambda controller, n, seed, step: [state] * n,
         "StateSampler": lambda controller, seed: SimpleNamespace(mixed=lambda n, limit_fraction: [state] * n),
         "build_c_harness": lambda *args: tmp_path / "harness",

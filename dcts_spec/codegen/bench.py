@@ -192,14 +192,28 @@ def _cmeel_prefix() -> Path | None:
     return None
 
 
-def python_runtime(controller, states: list[State]) -> dict:
-    ns = []
-    controller._last_q = None
-    for s in states:
+def _step_times(step, states: list[State], with_ref: bool) -> np.ndarray:
+    ns = np.empty(len(states), dtype=np.int64)
+    for i, s in enumerate(states):
         t0 = time.perf_counter_ns()
-        controller.step(s.q, s.dq, s.tau_ext, s.ref if controller.ref_size else None)
-        ns.append(time.perf_counter_ns() - t0)
-    return {"states": len(states), **_stats(np.array(ns))}
+        step(s.q, s.dq, s.tau_ext, s.ref if with_ref else None)
+        ns[i] = time.perf_counter_ns() - t0
+    return ns
+
+
+def python_runtime(controller, compiled, states: list[State]) -> dict:
+    """The Python runtime's step (`Controller.step`) and the bundle's step called through ctypes
+    (`CompiledController.step`, what a Python program using the firmware's code pays), on the
+    same states, one after the other, best of REPEATS runs each: their ratio is what prototyping
+    in Python costs."""
+    runs = {"python": [], "ctypes": []}
+    for _ in range(REPEATS):
+        controller._last_q = None
+        runs["python"].append(_step_times(controller.step, states, bool(controller.ref_size)))
+        runs["ctypes"].append(_step_times(compiled.step, states, bool(controller.ref_size)))
+    python, ctypes_step = (min(runs[key], key=np.median) for key in ("python", "ctypes"))
+    return {"states": len(states), "runs": REPEATS, **_stats(python), "ctypes_step": _stats(ctypes_step),
+            "ratio_to_ctypes": float(np.median(python) / np.median(ctypes_step))}
 
 
 def object_sizes(bundle: Path, manifest: dict, work: Path) -> dict:
@@ -249,8 +263,10 @@ def bench(spec_file: str | Path, formulation: str | None = None, states: int = 1
         c_traj = run_c_harness(exe, along, work, "trajectory")
         c_rand = run_c_harness(exe, independent, work, "random")
         python_along = along[: min(python_states, len(along))]
-        phase(f"timing the Python runtime on {len(python_along)} states")
-        py = python_runtime(controller, python_along)
+        phase(f"timing the Python runtime on {len(python_along)} states, and the C step through ctypes on the "
+              f"same, best of {REPEATS} runs each")
+        with load_bundle(bundle) as compiled:
+            py = python_runtime(controller, compiled, python_along)
         pin_ref = pinocchio_reference(controller, along, work)
         instructions = None
         if shutil.which("valgrind") is not None:
@@ -309,13 +325,16 @@ def format_report(r: dict) -> str:
     row("  of which qp_data (CasADi-generated)", c["qp_data"])
     row("  of which the lexicographic solve and the rest", c["solve_and_rest"])
     row("  fallback torque (only when needed)", c["fallback"])
-    row(f"Python runtime step ({r['python_step']['states']} states)", r["python_step"])
+    py = r["python_step"]
+    row(f"Python runtime step ({py['states']} closed-loop states)", py)
+    row("  the same bundle's C step through ctypes, same states", py["ctypes_step"])
     row("Pinocchio computeAllTerms + frame Jacobians", r["pinocchio_terms"])
     data_share = c["qp_data"]["median_us"] / c["step"]["median_us"]
     lines += [
         f"  Pinocchio: {r['pinocchio_terms']['how']}; frames {', '.join(r['pinocchio_terms']['frames']) or '-'}",
         "",
         f"ratio C step (closed loop, default) / Pinocchio terms, medians: {r['ratio_c_step_to_pinocchio']:.2f}",
+        f"ratio Python runtime step / C step through ctypes, medians: {py['ratio_to_ctypes']:.1f}",
         f"the {'QP data' if data_share > 0.5 else 'QP solve'} dominates: qp_data is {100 * data_share:.0f}% of the median step",
         f"QP: {c['qp_iterations']['mean']:.1f} DAQP iterations on average, max {c['qp_iterations']['max']}, "
         f"at most {c['qp_solves_max']} solves per step; statuses {c['statuses']}",
