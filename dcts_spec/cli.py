@@ -293,6 +293,8 @@ def sweep(
     objective: Annotated[Literal["worst", "mean"], typer.Option(help="--optimize: the worst or the mean METRIC "
                                                                 "over the samples")] = "worst",
     trials: Annotated[int, typer.Option(min=1, help="--optimize: controller values tried")] = 20,
+    plots: Annotated[bool, typer.Option("--plots/--no-plots", help="write the PNG plots of the metrics against "
+                                        "the swept values")] = True,
     quiet: QuietOption = False,
 ) -> None:
     """Run a campaign of samples (pushes, payloads, mismatch, noise, start states, gains) on the compiled
@@ -300,7 +302,7 @@ def sweep(
     from .campaign.command import SweepCommand, sweep_command
 
     command = SweepCommand(file, campaign, out, "serial" if serial else "ray", address, workers, max_samples,
-                           optimize, objective, trials, quiet)
+                           optimize, objective, trials, quiet, plots)
     with _feedback(quiet):
         code = sweep_command(command)
     raise typer.Exit(code)

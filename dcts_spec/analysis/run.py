@@ -9,6 +9,7 @@ from typing import Any
 
 import numpy as np
 
+from ..formulations import ControlProblem
 from ..robot.collision import CollisionModel
 from ..robot.model import Robot
 from ..sim.log import SimulationLog
@@ -52,10 +53,11 @@ class RunResult:
         path.write_text(json.dumps(json_ready(self.summary), indent=2) + "\n", encoding="utf-8")
 
 
-def analyze(sim: Simulation, log: SimulationLog, label: str | None = None) -> RunResult:
-    """Derive the time series and the summary of a finished run of `sim`."""
+def analyze(sim: Simulation, log: SimulationLog, label: str | None = None,
+            problem: ControlProblem | None = None) -> RunResult:
+    """Derive the time series and the summary of a finished run of `sim` (`problem`: see `evaluate`)."""
     spec, robot = sim.spec, sim.robot
-    series = evaluate(spec, robot, log)
+    series = evaluate(spec, robot, log, problem)
     priorities = list(sim.runtime.priorities)
     summary = {
         "spec": spec.name,

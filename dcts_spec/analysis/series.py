@@ -58,9 +58,11 @@ class TimeSeries:
         return out
 
 
-def evaluate(spec: Spec, robot: Robot, log: SimulationLog) -> TimeSeries:
-    """Derived time series of a run of `spec` on `robot` (the simulated robot)."""
-    problem = build_problem(spec, robot)
+def evaluate(spec: Spec, robot: Robot, log: SimulationLog, problem: ControlProblem | None = None) -> TimeSeries:
+    """Derived time series of a run of `spec` on `robot` (the simulated robot). `problem`: the
+    spec's symbolic problem on that robot if the caller has it (building it is most of the time
+    of a short run's analysis; a campaign's samples share it)."""
+    problem = problem or build_problem(spec, robot)
     n, samples = problem.n, log.steps
     a = ca.SX.sym("a", n)
     levels = problem.levels

@@ -34,10 +34,11 @@ class SweepCommand:
     objective: str = "worst"
     trials: int = 20
     quiet: bool = False
+    plots: bool = True
 
 
 def sweep_command(c: SweepCommand) -> int:
-    options = SweepOptions(c.engine, c.address, c.workers, not c.quiet, c.max_samples)
+    options = SweepOptions(c.engine, c.address, c.workers, not c.quiet, c.max_samples, c.plots)
     try:
         if c.optimize is None:
             result = sweep(c.spec, c.campaign, c.out, options)
@@ -51,6 +52,13 @@ def sweep_command(c: SweepCommand) -> int:
         return 2
     except (OutputFolderError, RuntimeUnavailable, CodegenError) as error:
         typer.echo(f"error: {error}", err=True)
+        return 1
+    except ModuleNotFoundError as error:
+        if error.name not in ("ray", "optuna"):
+            raise
+        typer.echo(f"error: dcts sweep{' --optimize' if error.name == 'optuna' else ''} needs {error.name}, which is "
+                   "not installed: pip install 'dcts-spec[sweep]'" + (" (or run with --serial)" if error.name == "ray"
+                                                                      else ""), err=True)
         return 1
     except KeyboardInterrupt:
         typer.echo(f"interrupted: the finished samples are in {c.out / SAMPLES}; run the same command to resume",

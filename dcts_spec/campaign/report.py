@@ -73,37 +73,38 @@ def summarize_metrics(rows: list[dict[str, Any]], metrics: list[str]) -> dict[st
 
 
 def write_plots(rows: list[dict[str, Any]], swept: list[str], metrics: list[str], folder: Path) -> list[str]:
-    """plots/<value>.png: each metric against one swept value (a point per sample); the names,
-    relative to the campaign folder."""
+    """plots/<value>.png: each metric against one swept value (a point per sample; a per-joint
+    value by its norm over the joints); the names, relative to the campaign folder."""
     ran = [r for r in rows if r["status"] == "ok"]
-    columns = _numeric_columns(ran, swept)
     written = []
     (folder / "plots").mkdir(exist_ok=True)
-    for column in columns:
-        fig = Figure(figsize=(4.0 * len(metrics), 3.4), layout="constrained")
+    for column in _numeric_columns(ran, swept):
+        # No layout engine: constrained layout was most of the time of a report (a second a figure).
+        fig = Figure(figsize=(3.3 * len(metrics), 2.8))
+        fig.subplots_adjust(left=0.6 / (3.3 * len(metrics)), right=0.98, bottom=0.17, top=0.95, wspace=0.4)
         for ax, metric in zip(fig.subplots(1, len(metrics), squeeze=False)[0], metrics):
             points = [(r[column], r[metric]) for r in ran if r.get(metric) is not None and r.get(column) is not None]
             if points:
                 xs, ys = zip(*points)
-                ax.scatter(xs, ys, s=8, alpha=0.6)
-            ax.set_xlabel(column)
-            ax.set_ylabel(metric)
+                ax.scatter(xs, ys, s=6, alpha=0.6, linewidths=0)
+            ax.set_xlabel(column, fontsize=8)
+            ax.set_ylabel(metric, fontsize=8)
+            ax.tick_params(labelsize=7)
             ax.grid(alpha=0.3)
         name = f"plots/{_file_name(column)}.png"
-        fig.savefig(folder / name, dpi=90)
+        fig.savefig(folder / name, dpi=80)
         written.append(name)
     return written
 
 
 def _numeric_columns(rows: list[dict[str, Any]], swept: list[str]) -> list[str]:
-    """The columns of the swept values (a per-joint value's joints, name[j]) that vary."""
+    """The columns of the swept values that vary (a per-joint value: its norm, name.norm)."""
     columns = []
     for name in swept:
-        for column in ([name] if rows and name in rows[0] else [c for c in (rows[0] if rows else {})
-                                                                   if c.startswith(f"{name}[")]):
-            values = {r.get(column) for r in rows}
-            if len(values) > 1 and all(isinstance(v, (int, float)) for v in values):
-                columns.append(column)
+        column = name if rows and name in rows[0] else f"{name}.norm"
+        values = {r.get(column) for r in rows}
+        if len(values) > 1 and all(isinstance(v, (int, float)) for v in values):
+            columns.append(column)
     return columns
 
 

@@ -17,6 +17,7 @@ from typing import Any
 from ..analysis.run import analyze
 from ..codegen import BundleCache
 from ..codegen.loader import CompiledController
+from ..formulations import ControlProblem, build_problem
 from ..sim.mismatch import scaled_robot
 from ..sim.runner import Simulation
 from ..sim.scenario import resolve_scenario
@@ -59,6 +60,9 @@ class SampleRunner:
         self.joints = JointRange(initial_configuration(self.spec, self.robot), limits.q_min, limits.q_max)
         self.primary_task = min(self.spec.tasks, key=lambda t: t.priority).name
         self._bundles: dict[tuple[str | None, float], Path] = {}
+        # The symbolic problem the analysis evaluates: the samples change the scenario (and perhaps
+        # the formulation), never the tasks, limits or robot it is built from.
+        self._problem: ControlProblem | None = None
 
     def bundle(self, formulation: str | None, mass_scale: float) -> Path:
         """The built bundle of the spec's controller for this formulation and mass scale
@@ -96,7 +100,9 @@ class SampleRunner:
         try:
             sim = Simulation(spec, report.robot, scenario, runtime, scaled_robot(report.robot, scenario.mass_scale),
                              "c", formulation)
-            result = analyze(sim, sim.run())
+            log = sim.run()
+            self._problem = self._problem or build_problem(spec, report.robot)
+            result = analyze(sim, log, problem=self._problem)
         except Exception:  # a bug: recorded with its traceback, the campaign goes on
             return row | {"status": "error", "error": traceback.format_exc(limit=8)}
         finally:

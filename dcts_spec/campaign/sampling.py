@@ -47,11 +47,12 @@ class Sample:
         return self.values[format_path(tuple(path))]
 
     def columns(self) -> dict[str, float | str | None]:
-        """Flat columns for the results: a per-joint value as name[j]."""
+        """Flat columns for the results: a per-joint value as name[j], and its norm."""
         out: dict[str, float | str | None] = {}
         for name, value in self.values.items():
             if isinstance(value, list):
                 out |= {f"{name}[{j}]": v for j, v in enumerate(value)}
+                out[f"{name}.norm"] = math.sqrt(sum(v * v for v in value))  # what its plots show
             else:
                 out[name] = value
         for name, direction in self.directions.items():

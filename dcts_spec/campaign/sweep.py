@@ -39,6 +39,7 @@ class SweepOptions:
     workers: int | None = None  # at most this many (default: one per CPU Ray has)
     progress: bool = True
     max_samples: int | None = None  # run at most this many new samples, then report (and stop)
+    plots: bool = True  # the PNGs of the metrics against the swept values (a second or so each)
 
 
 @dataclass
@@ -134,7 +135,8 @@ class CampaignSession:
         for metric in settings.metrics:
             for row in worst_cases(rows, metric, settings.worst):
                 worst.append(self._replay(metric, row))
-        plots = write_plots(rows, self.driver.sampler.swept(), list(settings.metrics), folder)
+        plots = write_plots(rows, self.driver.sampler.swept(), list(settings.metrics), folder) if self.options.plots \
+            else []
         throughput = self.pool.throughput if self.pool else Throughput(self.options.engine, 0)
         report = {
             "title": f"{self.driver.spec.name}: campaign {self.campaign_file.name}",

@@ -1,0 +1,237 @@
+"""`dcts sweep`: campaign files with located errors, reproducible samples, the same numbers on
+Ray and in a serial loop, resuming, replaying a worst case with `dcts simulate`, tuning.
+
+Small campaigns (4-8 samples of a 0.3 s run of specs/minimal.yaml) and one Ray session for the
+module (2 CPUs, no dashboard), to stay within the suite's time."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+import yaml
+from command_line import MINIMAL, invoke
+
+from dcts_spec.campaign import SweepOptions, load_campaign_text, sweep, tune
+from dcts_spec.campaign.runner import metric_columns
+from dcts_spec.campaign.sampling import Sampler
+from dcts_spec.spec import SpecError
+
+ray = pytest.importorskip("ray")
+
+CAMPAIGN = """\
+version: 1
+samples: 6
+seed: 11
+duration: 0.3
+pushes:
+  - body: link7
+    force: {magnitude: {uniform: [0, 60]}, direction: horizontal}
+    point: [0, 0, {uniform: [0, 0.05]}]
+    start: {uniform: [0.05, 0.15]}
+    duration: {choice: [0.05, 0.1]}
+payloads:
+  - frame: tool
+    mass: {uniform: [0.5, 2.5]}
+external_torque: {noise_std: {uniform: [0, 0.5]}, bias: {normal: [0, 0.2]}}
+initial_state: {offset: {uniform: [-3, 3]}, unit: deg}
+controller:
+  parameters:
+    tool_position.kp: {loguniform: [50, 400]}
+report:
+  worst: 2
+  metrics: [primary_rms_error, max_torque_violation, max_joint_velocity_violation]
+"""
+# Metrics that measure the machine, not the controller.
+TIMING = {"wall_time"}
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _private_bundle_cache(tmp_path_factory):
+    """No test writes into the user's bundle cache (the driver gives its cache to the workers)."""
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setenv("DCTS_CACHE_DIR", str(tmp_path_factory.getbasetemp() / "bundle-cache"))
+        yield
+
+
+@pytest.fixture(scope="module")
+def ray_session():
+    """One local Ray session for the module."""
+    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False, configure_logging=False)
+    yield
+    ray.shutdown()
+
+
+@pytest.fixture(scope="module")
+def spec_file(tmp_path_factory) -> Path:
+    """specs/minimal.yaml with the position task's kp as a run-time parameter, a 0.3 s run."""
+    folder = tmp_path_factory.mktemp("spec")
+    text = MINIMAL.read_text().replace("name: minimal", "name: sweep_minimal").replace("duration: 2.0", "duration: 0.3")
+    path = folder / "sweep_minimal.yaml"
+    path.write_text(text + "parameters:\n  tasks: {tool_position: [kp]}\n")
+    return path
+
+
+@pytest.fixture(scope="module")
+def campaign_file(tmp_path_factory) -> Path:
+    path = tmp_path_factory.mktemp("campaign") / "campaign.yaml"
+    path.write_text(CAMPAIGN)
+    return path
+
+
+@pytest.fixture(scope="module")
+def serial_run(ray_session, spec_file, campaign_file, tmp_path_factory):
+    """The whole campaign in a plain loop: the reference for the other runs."""
+    out = tmp_path_factory.mktemp("serial") / "out"
+    return sweep(spec_file, campaign_file, out, SweepOptions(engine="serial", progress=False, plots=False))
+
+
+def _rows(folder: Path) -> dict[int, dict]:
+    rows = [json.loads(line) for line in (folder / "samples.jsonl").read_text().splitlines()]
+    assert len({r["index"] for r in rows}) == len(rows), "a sample was run twice"
+    return {r["index"]: r for r in rows}
+
+
+def _without_timing(row: dict) -> dict:
+    return {k: v for k, v in row.items() if k not in TIMING}
+
+
+# -- the campaign file --------------------------------------------------------------------------------------
+
+
+def test_campaign_errors_are_located_and_say_what_is_allowed() -> None:
+    text = CAMPAIGN.replace("{uniform: [0, 60]}", "{unifrom: [0, 60]}").replace("mass: {uniform: [0.5, 2.5]}",
+                                                                               "mass: heavy")
+    text += "model_mismatch: {mass_scale: {uniform: [0.9, 1.1]}}\n"
+    with pytest.raises(SpecError) as caught:
+        load_campaign_text(text, "c.yaml")
+    messages = [str(d) for d in caught.value.diagnostics]
+    assert any(m.startswith("c.yaml:7:") and "'unifrom'" in m and "did you mean 'uniform'" in m for m in messages)
+    assert any(m.startswith("c.yaml:13:") and "expected a number or a distribution" in m for m in messages)
+    assert any(m.startswith("c.yaml:22:") and "its own C bundle" in m for m in messages), messages
+
+
+def test_campaign_names_checked_against_the_spec(spec_file, tmp_path) -> None:
+    campaign = tmp_path / "c.yaml"
+    campaign.write_text(CAMPAIGN.replace("body: link7", "body: link77").replace("primary_rms_error,", "primary_rms,"))
+    result = invoke("sweep", str(spec_file), "--campaign", str(campaign), "-o", str(tmp_path / "out"), "--serial",
+                    "--no-plots")
+    assert result.exit_code == 1
+    assert f"{campaign}:6:5: error: pushes[0].body: no frame 'link77' in the robot (did you mean 'link7'?)" in result.stderr
+    assert f"{campaign}:21:" in result.stderr and "unknown metric 'primary_rms'" in result.stderr
+    # run-time parameters are checked on the compiled controller, which knows their names and ranges
+    campaign.write_text(CAMPAIGN.replace("tool_position.kp: {loguniform: [50, 400]}", "tool_position.kq: 100\n    "
+                                         "tool_position.kp: {uniform: [-5, 400]}"))
+    result = invoke("sweep", str(spec_file), "--campaign", str(campaign), "-o", str(tmp_path / "out"), "--serial",
+                    "--no-plots")
+    assert result.exit_code == 1
+    assert f"{campaign}:18:" in result.stderr and "'tool_position.kq' is not a run-time parameter" in result.stderr
+    assert f"{campaign}:19:" in result.stderr and "leave the allowed range [0, 1e+08]" in result.stderr
+    assert not (tmp_path / "out" / "samples.jsonl").exists()
+
+
+def test_samples_are_drawn_from_seed_and_index_alone() -> None:
+    campaign = load_campaign_text(CAMPAIGN + "model_mismatch: {mass_scale: {grid: [0.9, 1.1]}}\n")
+    sampler = Sampler(campaign, 7)
+    assert sampler.count == 12  # 6 draws at each of 2 grid points
+    forward = [sampler.sample(i) for i in range(sampler.count)]
+    assert [sampler.sample(i) for i in reversed(range(sampler.count))][::-1] == forward
+    assert [s.value("model_mismatch", "mass_scale") for s in forward] == [0.9] * 6 + [1.1] * 6
+    masses = [s.value("payloads", 0, "mass") for s in forward]
+    assert all(0.5 <= m <= 2.5 for m in masses) and len(set(masses)) == 12
+    assert Sampler(load_campaign_text(CAMPAIGN.replace("seed: 11", "seed: 12")), 7).sample(0) != forward[0]
+
+
+# -- engines, resuming, replaying ----------------------------------------------------------------------------
+
+
+def test_ray_gives_the_serial_loops_numbers(ray_session, spec_file, campaign_file, serial_run, tmp_path) -> None:
+    result = sweep(spec_file, campaign_file, tmp_path / "out", SweepOptions(progress=False))
+    assert result.complete and result.report["throughput"]["engine"] == "ray"
+    assert result.report["throughput"]["workers"] == 2
+    serial, parallel = _rows(serial_run.folder), _rows(result.folder)
+    assert sorted(serial) == list(range(6))
+    assert all(r["status"] == "ok" for r in serial.values())
+    for i in serial:
+        assert _without_timing(parallel[i]) == _without_timing(serial[i])
+    # the samples differ (the campaign sweeps something) and the kp reached the controller's log
+    assert len({r["primary_rms_error"] for r in serial.values()}) == 6
+    assert (result.folder / "report.html").is_file() and result.report["plots"]
+    assert all((result.folder / p).is_file() for p in result.report["plots"])
+    assert "plots/controller.parameters.tool_position.kp.png" in result.report["plots"]
+    assert "plots/initial_state.offset.norm.png" in result.report["plots"]  # a per-joint value: by its norm
+
+
+def test_an_interrupted_campaign_resumes_where_it_stopped(spec_file, campaign_file, serial_run, tmp_path) -> None:
+    out = tmp_path / "out"  # (serial: resuming is the folder's business, whatever the engine)
+    first = sweep(spec_file, campaign_file, out,
+                  SweepOptions(engine="serial", progress=False, max_samples=3, plots=False))
+    assert not first.complete and len(_rows(out)) == 3
+    # killed while writing the fourth line: a line cut short
+    with (out / "samples.jsonl").open("a") as f:
+        f.write('{"index": 3, "seed": 1')
+    second = sweep(spec_file, campaign_file, out, SweepOptions(engine="serial", progress=False, plots=False))
+    assert second.complete and second.report["throughput"]["samples"] == 3  # only the 3 missing ones ran
+    rows, reference = _rows(out), _rows(serial_run.folder)
+    assert sorted(rows) == list(range(6))
+    assert all(_without_timing(rows[i]) == _without_timing(reference[i]) for i in rows)
+
+
+def test_a_changed_campaign_is_refused_at_its_file(spec_file, campaign_file, serial_run, tmp_path) -> None:
+    changed = tmp_path / "campaign.yaml"
+    changed.write_text(CAMPAIGN.replace("seed: 11", "seed: 12"))
+    result = invoke("sweep", str(spec_file), "--campaign", str(changed), "-o", str(serial_run.folder), "--serial")
+    assert result.exit_code == 1
+    assert result.stderr.startswith(f"{changed}:1:1: error: this campaign file changed since")
+    assert len(_rows(serial_run.folder)) == 6  # nothing written
+
+
+def test_a_folder_dcts_did_not_write_is_refused(spec_file, campaign_file, tmp_path) -> None:
+    (tmp_path / "notes.txt").write_text("mine")
+    result = invoke("sweep", str(spec_file), "--campaign", str(campaign_file), "-o", str(tmp_path), "--serial")
+    assert result.exit_code == 1 and "not written by dcts" in result.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["notes.txt"]
+
+
+def test_a_worst_case_replays_with_dcts_simulate(serial_run, tmp_path) -> None:
+    worst = serial_run.report["worst_cases"][0]
+    assert worst["metric"] == "primary_rms_error"
+    row = _rows(serial_run.folder)[worst["index"]]
+    assert worst["value"] == max(r["primary_rms_error"] for r in _rows(serial_run.folder).values())
+    replay = serial_run.folder / worst["replay"]
+    assert worst["command"].startswith(f"dcts simulate {replay}")
+    scenario = yaml.safe_load(replay.read_text())["scenario"]
+    assert scenario["parameters"][0]["values"]["tool_position.kp"] == row["controller.parameters.tool_position.kp"]
+    result = invoke("simulate", str(replay), "-o", str(tmp_path / "replay"), "--no-plots", "-q")
+    assert result.exit_code == 0, result.output
+    summary = json.loads((tmp_path / "replay" / "summary.json").read_text())
+    replayed = metric_columns(summary, "tool_position")
+    assert {k: v for k, v in replayed.items() if k not in TIMING} == {k: row[k] for k in replayed if k not in TIMING}
+
+
+def test_optimize_tunes_the_gain_and_resumes(ray_session, spec_file, tmp_path) -> None:
+    campaign_file = tmp_path / "campaign.yaml"
+    campaign_file.write_text(CAMPAIGN.replace("samples: 6", "samples: 3"))
+    out = tmp_path / "out"
+    options = SweepOptions(progress=False, plots=False)
+    first = tune(spec_file, campaign_file, out, "primary_rms_error", "worst", trials=3, options=options)
+    record = first.report["optimize"]
+    assert record["trials"] == 3 and len((out / "trials.jsonl").read_text().splitlines()) == 3
+    assert len({t["values"]["tool_position.kp"] for t in record["history"]}) == 3
+    assert record["best"]["value"] == min(t["value"] for t in record["history"])
+    assert 50 <= record["best"]["values"]["tool_position.kp"] <= 400
+    # the campaign's rows ran with the best gain: their worst is the best trial's objective
+    rows = _rows(out)
+    assert {r["controller.parameters.tool_position.kp"] for r in rows.values()} == {record["best"]["values"]["tool_position.kp"]}
+    assert max(r["primary_rms_error"] for r in rows.values()) == pytest.approx(record["best"]["value"], rel=1e-12)
+    second = tune(spec_file, campaign_file, out, "primary_rms_error", "worst", trials=4, options=options)
+    assert second.report["optimize"]["trials"] == 4  # the three finished trials kept, one more run
+    assert len((out / "trials.jsonl").read_text().splitlines()) == 4
+
+
+def test_sweep_help_and_an_unknown_optimize_metric(spec_file, campaign_file, tmp_path) -> None:
+    assert invoke("sweep", "--help").exit_code == 0
+    result = invoke("sweep", str(spec_file), "--campaign", str(campaign_file), "-o", str(tmp_path / "o"), "--serial",
+                    "--optimize", "primary_rms_eror")
+    assert result.exit_code == 2 and "did you mean 'primary_rms_error'" in result.stderr
