@@ -1,5 +1,6 @@
 """Every YAML block of the README and docs/ means what it says: a whole spec (it has `version:`)
-validates as it stands; a fragment's sections replace specs/minimal.yaml's, and that validates."""
+validates as it stands; a fragment's sections replace specs/minimal.yaml's, and that validates;
+a campaign file of `dcts sweep` (it has `samples:`) loads as one."""
 
 from __future__ import annotations
 
@@ -9,6 +10,7 @@ from pathlib import Path
 import pytest
 import yaml
 
+from dcts_spec.campaign import load_campaign_text
 from dcts_spec.spec import load_spec_text
 from dcts_spec.validate import validate_spec
 
@@ -33,6 +35,9 @@ def test_the_docs_have_yaml_blocks():
 @pytest.mark.parametrize(("file", "line", "block"), _blocks(), ids=lambda v: str(v)[:40])
 def test_yaml_block_validates(file, line, block):
     data = yaml.safe_load(block)
+    if "samples" in data:
+        load_campaign_text(block, f"{file} (the block at line {line})")  # raises SpecError with the located message
+        return
     if "version" in data:
         text = block
     else:
