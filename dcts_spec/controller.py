@@ -145,6 +145,7 @@ class Controller:
         self.problem = build_problem(spec, robot)
         self.law = FORMULATIONS[self.formulation](self.problem)
         self.data = data_function(self.problem, self.law)
+        self._ref_size = int(self.problem.ref.shape[0])  # (asking the SX each step costs microseconds)
         self._data_buffer: BufferedFunction | None = None
         fallback = fallback_torque(self.problem)
         p = self.problem
@@ -185,7 +186,7 @@ class Controller:
 
     @property
     def ref_size(self) -> int:
-        return int(self.problem.ref.shape[0])
+        return self._ref_size
 
     @property
     def param_layout(self) -> ParameterLayout:
@@ -329,7 +330,8 @@ class Controller:
             check = check_bounds(self._structure.bound_rows, data["A"], data["lba"].ravel(), data["uba"].ravel(), x)
             crossed = set(check.violated) | set(np.flatnonzero(data["excess"].ravel() > STATE_TOLERANCE).tolist())
             if crossed:
-                status, relaxed = STATUS_LIMITS_RELAXED, [self.bound_names[i] for i in sorted(crossed)]
+                names = self.bound_names
+                status, relaxed = STATUS_LIMITS_RELAXED, [names[i] for i in sorted(crossed)]
         ddq = data["ddq0"].ravel() + data["Q"] @ x
         # (np.minimum/np.maximum: np.clip's numbers, without its Python-level overhead)
         scaling = np.minimum(np.maximum(data["s0"].ravel() + data["S"] @ x, 0.0), 1.0)

@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 
 import daqp
 import numpy as np
@@ -71,6 +72,22 @@ class Structure:
 
     bound_rows: range
     priorities: tuple[tuple[int, tuple[int, ...]], ...]
+
+    @cached_property
+    def _level_variables(self) -> list[np.ndarray]:
+        return [np.array([s, *bend], dtype=int) for s, bend in self.priorities]
+
+    @cached_property
+    def levels_above(self) -> list[np.ndarray]:
+        """[k]: the variables (s and δ) of the levels [0, k), as one index array."""
+        return [np.concatenate([np.zeros(0, dtype=int), *self._level_variables[:k]])
+                for k in range(len(self.priorities) + 1)]
+
+    @cached_property
+    def levels_from(self) -> list[np.ndarray]:
+        """[k]: the variables of the levels [k, end), as one index array."""
+        return [np.concatenate([np.zeros(0, dtype=int), *self._level_variables[k:]])
+                for k in range(len(self.priorities) + 1)]
 
 
 def clip_to_daqp(values: np.ndarray, out: np.ndarray) -> None:
@@ -148,9 +165,8 @@ class Cascade:
     def final(self, upto: int, lbx, ubx) -> np.ndarray | None:
         """½xᵀHx + fᵀx with the levels [0, upto) as they are in lbx/ubx and the others nominal."""
         lo, hi = lbx.copy(), ubx.copy()
-        for s, bend in self.structure.priorities[upto:]:
-            lo[s] = hi[s] = self.nominal[s]
-            lo[list(bend)] = hi[list(bend)] = 0.0
+        below = self.structure.levels_from[upto]
+        lo[below] = hi[below] = self.nominal[below]  # (s = 1, δ = 0)
         return self._solve(self.H, self.f, lo, hi)
 
     def _proximal(self, weights: np.ndarray, linear: np.ndarray, step: float, lbx, ubx) -> np.ndarray | None:
@@ -279,11 +295,9 @@ class Cascade:
 
     def _nominal_through(self, upto: int, lbx, ubx) -> bool:
         """Are the levels [0, upto) fixed at their nominal values (s = 1, δ = 0)?"""
-        for s, bend in self.structure.priorities[:upto]:
-            bend = list(bend)
-            if not (lbx[s] == ubx[s] == self.nominal[s] and np.all(lbx[bend] == 0.0) and np.all(ubx[bend] == 0.0)):
-                return False
-        return True
+        above = self.structure.levels_above[upto]
+        nominal = self.nominal[above]
+        return bool((lbx[above] == nominal).all() and (ubx[above] == nominal).all())
 
     def _first_to_scale(self) -> tuple[int, np.ndarray, np.ndarray, np.ndarray | None]:
         """The lowest level i that can be scaled (δᵢ = 0) with every level above it met: then
@@ -293,9 +307,8 @@ class Cascade:
         scaling stage's solution, or (0, the bounds, None) to start from the top."""
         for i in range(len(self.structure.priorities) - 1, 0, -1):
             lbx, ubx = self.lbx.copy(), self.ubx.copy()
-            for s, bend in self.structure.priorities[:i]:
-                lbx[s] = ubx[s] = self.nominal[s]
-                lbx[list(bend)] = ubx[list(bend)] = 0.0
+            above = self.structure.levels_above[i]
+            lbx[above] = ubx[above] = self.nominal[above]  # (s = 1, δ = 0)
             bend = list(self.structure.priorities[i][1])
             lbx[bend] = ubx[bend] = 0.0
             x = self.scale(i, lbx, ubx)
