@@ -7,6 +7,10 @@ module (2 CPUs, no dashboard), to stay within the suite's time."""
 from __future__ import annotations
 
 import json
+import signal
+import subprocess
+import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -14,8 +18,10 @@ import yaml
 from command_line import MINIMAL, invoke
 
 from dcts_spec.campaign import SweepOptions, load_campaign_text, sweep, tune
+from dcts_spec.campaign.engine import RayPool
 from dcts_spec.campaign.runner import metric_columns
 from dcts_spec.campaign.sampling import Sampler
+from dcts_spec.campaign.sweep import CampaignSession
 from dcts_spec.spec import SpecError
 
 ray = pytest.importorskip("ray")
@@ -163,6 +169,24 @@ def test_ray_gives_the_serial_loops_numbers(ray_session, spec_file, campaign_fil
     assert "plots/initial_state.offset.norm.png" in result.report["plots"]  # a per-joint value: by its norm
 
 
+def test_a_dead_worker_is_replaced_and_its_samples_run_again(ray_session, spec_file, campaign_file,
+                                                             serial_run) -> None:
+    session = CampaignSession(spec_file, campaign_file, serial_run.folder, {"mode": "sweep"},
+                              SweepOptions(progress=False))
+    pool = RayPool(session.inputs)
+    try:
+        rows = []
+        for row in pool.map(list(range(6))):
+            if not rows:
+                ray.kill(pool._actors[0])  # as a segfault in the C code would end it
+            rows.append(row)
+    finally:
+        pool.close()
+    reference = _rows(serial_run.folder)
+    assert sorted(r["index"] for r in rows) == list(range(6))
+    assert all(_without_timing(r) == _without_timing(reference[r["index"]]) for r in rows)
+
+
 def test_an_interrupted_campaign_resumes_where_it_stopped(spec_file, campaign_file, serial_run, tmp_path) -> None:
     out = tmp_path / "out"  # (serial: resuming is the folder's business, whatever the engine)
     first = sweep(spec_file, campaign_file, out,
@@ -176,6 +200,32 @@ def test_an_interrupted_campaign_resumes_where_it_stopped(spec_file, campaign_fi
     rows, reference = _rows(out), _rows(serial_run.folder)
     assert sorted(rows) == list(range(6))
     assert all(_without_timing(rows[i]) == _without_timing(reference[i]) for i in rows)
+
+
+def test_a_killed_campaign_resumes(spec_file, tmp_path) -> None:
+    """SIGTERM in the middle of a campaign (a cluster job's end): the finished samples stay, and the
+    same command runs the others only."""
+    campaign_file = tmp_path / "campaign.yaml"
+    campaign_file.write_text(CAMPAIGN.replace("samples: 6", "samples: 30"))
+    out = tmp_path / "out"
+    args = ["sweep", str(spec_file), "--campaign", str(campaign_file), "-o", str(out), "--serial", "--no-plots", "-q"]
+    script = Path(sys.executable).with_name("dcts")
+    process = subprocess.Popen([str(script), *args], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    samples = out / "samples.jsonl"
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline and process.poll() is None:
+        if samples.is_file() and samples.read_text().count("\n") >= 2:
+            break
+        time.sleep(0.05)
+    process.send_signal(signal.SIGTERM)
+    assert process.wait(60) == 128 + signal.SIGTERM, process.stderr.read() if process.stderr else ""
+    stopped = _rows(out)
+    assert 2 <= len(stopped) < 30
+    result = sweep(spec_file, campaign_file, out, SweepOptions(engine="serial", progress=False, plots=False))
+    assert result.complete and result.report["throughput"]["samples"] == 30 - len(stopped)
+    rows = _rows(out)
+    assert sorted(rows) == list(range(30))
+    assert all(_without_timing(rows[i]) == _without_timing(stopped[i]) for i in stopped)
 
 
 def test_a_changed_campaign_is_refused_at_its_file(spec_file, campaign_file, serial_run, tmp_path) -> None:
@@ -228,6 +278,9 @@ def test_optimize_tunes_the_gain_and_resumes(ray_session, spec_file, tmp_path) -
     second = tune(spec_file, campaign_file, out, "primary_rms_error", "worst", trials=4, options=options)
     assert second.report["optimize"]["trials"] == 4  # the three finished trials kept, one more run
     assert len((out / "trials.jsonl").read_text().splitlines()) == 4
+    assert "Best of 4 trials" in (out / "report.html").read_text()
+    best = second.report["optimize"]["best"]  # the rows are the best trial's, whichever run found it
+    assert max(r["primary_rms_error"] for r in _rows(out).values()) == pytest.approx(best["value"], rel=1e-12)
 
 
 def test_sweep_help_and_an_unknown_optimize_metric(spec_file, campaign_file, tmp_path) -> None:
@@ -235,3 +288,6 @@ def test_sweep_help_and_an_unknown_optimize_metric(spec_file, campaign_file, tmp
     result = invoke("sweep", str(spec_file), "--campaign", str(campaign_file), "-o", str(tmp_path / "o"), "--serial",
                     "--optimize", "primary_rms_eror")
     assert result.exit_code == 2 and "did you mean 'primary_rms_error'" in result.stderr
+    assert not (tmp_path / "o").exists()  # refused before anything was written
+    result = invoke("sweep", str(tmp_path / "missing.yaml"), "--campaign", str(campaign_file), "-o", str(tmp_path / "o"))
+    assert result.exit_code == 1 and str(tmp_path / "missing.yaml") in result.stderr and "Traceback" not in result.output

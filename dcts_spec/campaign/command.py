@@ -13,10 +13,10 @@ from ..codegen import CodegenError
 from ..files import OutputFolderError
 from ..sim.runtime import RuntimeUnavailable
 from ..spec import SpecError
-from .optimize import UnknownMetric, tune
+from .optimize import tune
 from .report import summary_lines
 from .results import SAMPLES
-from .sweep import Engine, SweepOptions, sweep
+from .sweep import Engine, SweepOptions, UnknownMetric, sweep
 
 INTERRUPTED = 130
 

@@ -70,21 +70,26 @@ class RayPool:
         start = time.perf_counter()
         cpus = int(ray.cluster_resources().get("CPU", 1))
         count = max(1, min(workers or cpus, cpus))
-        actor = ray.remote(num_cpus=1)(SampleRunner)
-        self._actors = [actor.remote(inputs) for _ in range(count)]
+        self._actor_class = ray.remote(num_cpus=1)(SampleRunner)
+        self._inputs = inputs
+        self._actors = [self._actor_class.remote(inputs) for _ in range(count)]
+        self._replacements: dict[Any, Any] = {}  # a dead actor → the one started in its place
         ray.get([a.__ray_ready__.remote() for a in self._actors])
         self.throughput = Throughput("ray", count, startup_seconds=time.perf_counter() - start)
 
     def map(self, indices: list[int], parameters: dict[str, Any] | None = None) -> Iterator[dict[str, Any]]:
         import ray
+        from ray.exceptions import RayActorError, RayError
 
         todo = iter(indices)
-        pending: dict[Any, Any] = {}
+        retry: list[int] = []  # samples whose worker died under them, to run once more
+        failed: set[int] = set()
+        pending: dict[Any, tuple[Any, int]] = {}  # task → (its actor, its sample)
 
         def submit(actor: Any) -> None:
-            index = next(todo, None)
+            index = retry.pop() if retry else next(todo, None)
             if index is not None:
-                pending[actor.run.remote(index, parameters)] = actor
+                pending[actor.run.remote(index, parameters)] = (actor, index)
 
         for actor in self._actors:
             for _ in range(IN_FLIGHT):
@@ -93,15 +98,35 @@ class RayPool:
         try:
             while pending:
                 done, _ = ray.wait(list(pending), num_returns=1)
-                actor = pending.pop(done[0])
+                actor, index = pending.pop(done[0])
+                try:
+                    row = ray.get(done[0])
+                except RayActorError as error:
+                    # The worker died (a crash in C, out of memory): a new one takes its place and
+                    # the sample runs once more; dying twice, it is recorded as an error.
+                    actor = self._replace(actor)
+                    row = None if index not in failed else {"index": index, "status": "error",
+                                                           "error": f"the worker died twice running it: {error}"}
+                    if row is None:
+                        failed.add(index)
+                        retry.append(index)
+                except RayError as error:
+                    row = {"index": index, "status": "error", "error": f"{type(error).__name__}: {error}"}
                 submit(actor)
-                row = ray.get(done[0])
-                self.throughput.samples += 1
-                self.throughput.seconds = before + time.perf_counter() - start
-                yield row
+                if row is not None:
+                    self.throughput.samples += 1
+                    self.throughput.seconds = before + time.perf_counter() - start
+                    yield row
         finally:
             for ref in pending:  # an interrupted map: the queued samples are not wanted any more
                 ray.cancel(ref)
+
+    def _replace(self, dead: Any) -> Any:
+        """The actor in the dead one's place (started once, whichever of its tasks reports first)."""
+        if dead not in self._replacements:
+            self._replacements[dead] = self._actor_class.remote(self._inputs)
+            self._actors[self._actors.index(dead)] = self._replacements[dead]
+        return self._replacements[dead]
 
     def close(self) -> None:
         import ray

@@ -15,10 +15,10 @@ import math
 from pathlib import Path
 from typing import Any
 
-from ..spec.errors import SpecError, did_you_mean
+from ..spec.errors import SpecError
 from .document import Distribution
 from .report import LOWER_IS_WORSE
-from .sweep import CampaignSession, SweepOptions, SweepResult, allowed_metrics, campaign_session
+from .sweep import CampaignSession, SweepOptions, SweepResult, campaign_session
 
 JOURNAL = "optuna.journal"
 TRIALS = "trials.jsonl"
@@ -101,13 +101,15 @@ def _objective(rows: list[dict[str, Any]], metric: str, objective: str, directio
     return min(values) if direction == "maximize" else max(values)
 
 
+def _ran_with(row: dict[str, Any], values: dict[str, Any]) -> bool:
+    """Whether a campaign row ran with these controller values."""
+    return all(row.get("formulation" if name == "formulation" else f"controller.parameters.{name}") == value
+               for name, value in values.items())
+
+
 def _append(path: Path, record: dict[str, Any]) -> None:
     with path.open("a", encoding="utf-8") as f:
         f.write(json.dumps(record) + "\n")
-
-
-class UnknownMetric(ValueError):
-    """--optimize names no per-run metric of this spec."""
 
 
 def tune(spec_file: str | Path, campaign_file: str | Path, out: str | Path, metric: str, objective: str = "worst",
@@ -116,11 +118,10 @@ def tune(spec_file: str | Path, campaign_file: str | Path, out: str | Path, metr
     run the campaign's samples with the best ones and write the report."""
     settings = {"mode": "optimize", "metric": metric, "objective": objective}
     with campaign_session(spec_file, campaign_file, out, settings, options) as session:
-        allowed = allowed_metrics(session.driver)
-        if metric not in allowed:
-            raise UnknownMetric(f"--optimize: unknown metric {metric!r}{did_you_mean(metric, allowed)}; allowed: "
-                                f"{', '.join(allowed)}")
         record = optimize(session, metric, objective, trials)
-        session.parameters = record["best"]["values"]
+        best = record["best"]["values"]
+        if any(not _ran_with(row, best) for row in session.rows.values()):
+            session.forget_rows()  # the rows of an earlier best (a resumed study found a better one)
+        session.parameters = best
         session.run(session.todo())
         return session.finish({"optimize": record})

@@ -127,6 +127,15 @@ def write_html(report: dict[str, Any], plots: list[str], path: Path) -> None:
     r = report["rates"]
     t = report["throughput"]
     images = "".join(f'<figure><img src="{e(p)}" alt="{e(p)}"></figure>' for p in plots)
+    tuned = ""
+    if "optimize" in report:
+        o = report["optimize"]
+        trials = "".join(f"<tr><td>{t['trial']}</td><td>{e(json.dumps(t['values']))}</td><td>{_g(t['value'])}</td></tr>"
+                         for t in o["history"])
+        tuned = (f"<h2>Tuning: {e(o['objective'])} {e(o['metric'])} ({e(o['direction'])})</h2><p>Best of {o['trials']} "
+                 f"trials: <code>{e(json.dumps(o['best']['values']))}</code>, {_g(o['best']['value'])}; the samples "
+                 f"below ran with it.</p><table><tr><th>trial</th><th>values</th><th>{e(o['objective'])}</th></tr>"
+                 f"{trials}</table>")
     path.write_text(f"""<!doctype html>
 <html><head><meta charset="utf-8"><title>{e(report['title'])}</title>
 <style>body{{font-family:sans-serif;margin:2em}} table{{border-collapse:collapse;margin:1em 0}}
@@ -134,6 +143,7 @@ td,th{{border:1px solid #ccc;padding:.3em .6em;text-align:left}} img{{max-width:
 <body><h1>{e(report['title'])}</h1>
 <p>{r['samples']} samples: {r['ran']} ran, {r['invalid']} invalid, {r['errors']} errors.
 Engine: {e(t['engine'])} ({t['workers']} workers), {_g(t['samples_per_second'])} samples/s this run.</p>
+{tuned}
 <h2>Rates (of the samples that ran)</h2><table><tr><th>samples with</th><th>count</th><th>rate</th></tr>{rate_rows}</table>
 <h2>Metrics</h2><table><tr><th>metric</th><th>mean</th><th>worst</th></tr>{metric_rows}</table>
 <h2>Worst cases</h2><p>Each replays as a plain <code>dcts simulate</code> (run from the folder the campaign ran in).</p>

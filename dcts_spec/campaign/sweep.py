@@ -13,6 +13,7 @@ from typing import Any, Literal
 from ..codegen.cache import default_cache_dir
 from ..codegen.loader import CompiledController
 from ..phases import phase
+from ..spec import load_spec
 from ..spec.errors import Diagnostic, SpecError, did_you_mean
 from .document import Campaign, load_campaign
 from .engine import Pool, RayPool, SerialPool, Throughput, ray_session
@@ -30,6 +31,10 @@ RUN_METRICS = ("max_joint_position_violation", "max_joint_velocity_violation", "
                "limits_relaxed", "min_scaling", "primary_mean_acceleration_error", "acceleration_energy_integral",
                "kinetic_energy_peak", "task_space_kinetic_energy_peak", "null_space_kinetic_energy_peak",
                "max_disturbance_torque", "max_external_torque_estimate_error", "wall_time")
+
+
+class UnknownMetric(ValueError):
+    """--optimize names no per-run metric of this spec."""
 
 
 @dataclass(frozen=True)
@@ -68,11 +73,17 @@ class CampaignSession:
         self.options = options
         self.spec_file, self.campaign_file = spec_file, campaign_file
         self.campaign: Campaign = load_campaign(campaign_file)  # its errors before the spec's
+        load_spec(spec_file)  # a missing or unreadable spec: a located error, as for every command
         self.inputs = CampaignInputs(str(spec_file), spec_file.read_text(encoding="utf-8"), str(campaign_file),
                                      campaign_file.read_text(encoding="utf-8"), str(default_cache_dir()))
         self.driver = SampleRunner(self.inputs)
         self.folder = ResultsFolder(out, spec_file, campaign_file, settings)
         check_campaign(self.driver)
+        metric = settings.get("metric")  # an optimization's, checked before anything is written
+        allowed = allowed_metrics(self.driver)
+        if metric is not None and metric not in allowed:
+            raise UnknownMetric(f"--optimize: unknown metric {metric!r}{did_you_mean(metric, allowed)}; allowed: "
+                                f"{', '.join(allowed)}")
         self.rows = self.folder.open()
         phase(f"building the C controller{'s' if len(self._bundles()) > 1 else ''} (once)")
         for formulation, mass_scale in self._bundles():
@@ -89,6 +100,11 @@ class CampaignSession:
     def todo(self) -> list[int]:
         todo = [i for i in range(self.driver.sampler.count) if i not in self.rows]
         return todo[: self.options.max_samples] if self.options.max_samples is not None else todo
+
+    def forget_rows(self) -> None:
+        """Start the campaign's rows afresh (samples.jsonl emptied)."""
+        self.folder.samples_file.unlink(missing_ok=True)
+        self.rows = {}
 
     def start_pool(self) -> Pool:
         """The engine's pool, started on first use (Ray only once the inputs proved good)."""
