@@ -13,6 +13,7 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 import yaml
 from command_line import MINIMAL, invoke
@@ -21,6 +22,7 @@ from dcts_spec.campaign import SweepOptions, load_campaign_text, sweep, tune
 from dcts_spec.campaign.engine import RayPool
 from dcts_spec.campaign.runner import metric_columns
 from dcts_spec.campaign.sampling import Sampler
+from dcts_spec.campaign.scenario import JointRange, sample_spec_data
 from dcts_spec.campaign.sweep import CampaignSession
 from dcts_spec.spec import SpecError
 
@@ -147,6 +149,25 @@ def test_samples_are_drawn_from_seed_and_index_alone() -> None:
     masses = [s.value("payloads", 0, "mass") for s in forward]
     assert all(0.5 <= m <= 2.5 for m in masses) and len(set(masses)) == 12
     assert Sampler(load_campaign_text(CAMPAIGN.replace("seed: 11", "seed: 12")), 7).sample(0) != forward[0]
+
+
+def test_grids_cross_and_start_states_stay_within_the_limits() -> None:
+    campaign = load_campaign_text("version: 1\nsamples: 3\nduration: 0.3\ninitial_state: {within_limits: 0.2}\n"
+                                  "controller: {formulation: {grid: [dcts, osc]}}\n"
+                                  "payloads: [{frame: tool, mass: {grid: [1, 2]}}]\n")
+    sampler = Sampler(campaign, 7)
+    samples = [sampler.sample(i) for i in range(sampler.count)]
+    assert [(s.value("payloads", 0, "mass"), s.formulation) for s in samples] == [
+        (m, f) for m in (1.0, 2.0) for f in ("dcts", "osc") for _ in range(3)]
+    joints = JointRange(np.zeros(7), -np.arange(1.0, 8.0), np.arange(1.0, 8.0))
+    for sample in samples:
+        data = sample_spec_data({"scenario": {"duration": 2.0, "unit": "deg"}}, campaign, sample, joints)
+        q = np.array(data["scenario"]["initial_q"])
+        span = joints.q_max - joints.q_min
+        assert np.all(q >= joints.q_min + 0.2 * span - 1e-12) and np.all(q <= joints.q_max - 0.2 * span + 1e-12)
+        assert data["scenario"]["unit"] == "rad" and data["controller"]["formulation"] == sample.formulation
+        assert data["scenario"]["payloads"] == [{"frame": "tool", "mass": sample.value("payloads", 0, "mass"),
+                                                 "com": [0.0, 0.0, 0.0]}]
 
 
 # -- engines, resuming, replaying ----------------------------------------------------------------------------
@@ -284,7 +305,8 @@ def test_optimize_tunes_the_gain_and_resumes(ray_session, spec_file, tmp_path) -
 
 
 def test_sweep_help_and_an_unknown_optimize_metric(spec_file, campaign_file, tmp_path) -> None:
-    assert invoke("sweep", "--help").exit_code == 0
+    help_ = invoke("sweep", "--help")
+    assert help_.exit_code == 0 and "<bool>" not in help_.output
     result = invoke("sweep", str(spec_file), "--campaign", str(campaign_file), "-o", str(tmp_path / "o"), "--serial",
                     "--optimize", "primary_rms_eror")
     assert result.exit_code == 2 and "did you mean 'primary_rms_error'" in result.stderr

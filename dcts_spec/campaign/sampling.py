@@ -1,8 +1,9 @@
 """The samples of a campaign: every swept value, drawn per sample from (seed, index) alone.
 
-Sample i sits at grid point i // samples (the grids crossed in file order) and draws its random
-values from a generator seeded with (campaign seed, i): any sample can be drawn again on its
-own, in any order, which is what resuming and replaying rely on.
+Sample i sits at grid point i // samples (the grids crossed in the order of `variables`, then the
+formulation's; the first varies slowest) and draws its random values from a generator seeded
+with (campaign seed, i): any sample can be drawn again on its own, in any order, which is what
+resuming and replaying rely on.
 """
 
 from __future__ import annotations
@@ -119,7 +120,8 @@ class Sampler:
 
 
 def variables(campaign: Campaign, joints: int) -> Iterator[Variable]:
-    """Every value of the campaign file in file order (the order of the draws)."""
+    """Every value of the campaign file, section by section (pushes, payloads, model_mismatch,
+    external_torque, initial_state, controller parameters): the order of the draws."""
     for i, push in enumerate(campaign.pushes):
         at = ("pushes", i)
         if isinstance(push.force, ForceMagnitude):
