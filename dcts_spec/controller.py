@@ -158,7 +158,7 @@ class Controller:
         self._last_q: np.ndarray | None = None
         qp = self.law.qp
         self._structure = None if qp is None else Structure(
-            qp.rows_of(BOUNDS), tuple((p.scaling, tuple(p.bend)) for p in qp.priorities))
+            qp.rows_of(BOUNDS), tuple((p.scaling, tuple(p.bend)) for p in qp.priorities), self.law.spare_variables)
 
     # -- sizes and layout ------------------------------------------------------------------------
 

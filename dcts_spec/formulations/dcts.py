@@ -99,7 +99,7 @@ def dcts(problem: ControlProblem) -> ControlLaw:
     scaling = Affine(ca.SX.zeros(len(levels)), ca.SX(len(levels), nx))
     for i in range(k):
         scaling.matrix[i, i] = 1.0
-    law = ControlLaw(torque, scaling, qp, notes, acceleration=acceleration)
+    law = ControlLaw(torque, scaling, qp, notes, acceleration=acceleration, spare_variables=released)
     if structure.least_squares_last:
         # its scaling is filled in after the solve (controller), from its task acceleration
         scaling.offset[-1] = 1.0

@@ -100,6 +100,9 @@ class ControlLaw:
     # The actual joint acceleration a(x) = M⁻¹(τ − ν − g + τ_ext), where the formulation has it at
     # hand (the QP ones): the commanded q̈ is then read from it, not formed again as M⁻¹(M a).
     acceleration: Affine | None = None
+    # Some of the variables after the levels' own are seen by no row (up to rounding): DCTS's N_k z
+    # below a run-time activation (solve.Structure.spare_variables)
+    spare_variables: bool = False
 
     @property
     def nx(self) -> int:
