@@ -190,6 +190,24 @@ def test_ray_gives_the_serial_loops_numbers(ray_session, spec_file, campaign_fil
     assert "plots/initial_state.offset.norm.png" in result.report["plots"]  # a per-joint value: by its norm
 
 
+def test_a_cluster_address_runs_the_campaign_there(ray_session, spec_file, campaign_file, serial_run,
+                                                   tmp_path) -> None:
+    """`--address`: another process (here the module's Ray session stands for a cluster) runs the
+    samples; the command connects to it instead of starting its own."""
+    out = tmp_path / "out"
+    address = ray.get_runtime_context().gcs_address
+    args = ["sweep", str(spec_file), "--campaign", str(campaign_file), "-o", str(out), "--address", address,
+            "--no-plots", "-q"]
+    finished = subprocess.run([str(Path(sys.executable).with_name("dcts")), *args], capture_output=True, text=True,
+                              timeout=300)
+    assert finished.returncode == 0, finished.stderr
+    report = json.loads((out / "report.json").read_text())
+    assert report["throughput"]["engine"] == "ray" and report["throughput"]["workers"] == 2
+    rows, reference = _rows(out), _rows(serial_run.folder)
+    assert sorted(rows) == list(range(6))
+    assert all(_without_timing(rows[i]) == _without_timing(reference[i]) for i in rows)
+
+
 def test_a_dead_worker_is_replaced_and_its_samples_run_again(ray_session, spec_file, campaign_file,
                                                              serial_run) -> None:
     session = CampaignSession(spec_file, campaign_file, serial_run.folder, {"mode": "sweep"},
