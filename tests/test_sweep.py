@@ -16,14 +16,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-from command_line import MINIMAL, invoke
+from command_line import MINIMAL, ROOT, invoke
 
 from dcts_spec.campaign import SweepOptions, load_campaign_text, sweep, tune
 from dcts_spec.campaign.engine import RayPool
-from dcts_spec.campaign.runner import metric_columns
+from dcts_spec.campaign.runner import CampaignInputs, SampleRunner, metric_columns
 from dcts_spec.campaign.sampling import Sampler
 from dcts_spec.campaign.scenario import JointRange, sample_spec_data
-from dcts_spec.campaign.sweep import CampaignSession
+from dcts_spec.campaign.schema import campaign_json_schema_text
+from dcts_spec.campaign.sweep import CampaignSession, check_campaign
 from dcts_spec.spec import SpecError
 
 ray = pytest.importorskip("ray")
@@ -51,6 +52,7 @@ report:
   worst: 2
   metrics: [primary_rms_error, max_torque_violation, max_joint_velocity_violation]
 """
+EXAMPLE = ROOT / "specs" / "campaigns" / "pushes_payloads.yaml"
 # Metrics that measure the machine, not the controller.
 TIMING = {"wall_time"}
 
@@ -168,6 +170,25 @@ def test_grids_cross_and_start_states_stay_within_the_limits() -> None:
         assert data["scenario"]["unit"] == "rad" and data["controller"]["formulation"] == sample.formulation
         assert data["scenario"]["payloads"] == [{"frame": "tool", "mass": sample.value("payloads", 0, "mass"),
                                                  "com": [0.0, 0.0, 0.0]}]
+
+
+def test_the_committed_campaign_schema_is_up_to_date_and_takes_the_example() -> None:
+    jsonschema = pytest.importorskip("jsonschema")
+    committed = ROOT / "schemas" / "dcts-campaign.schema.json"
+    assert committed.read_text() == campaign_json_schema_text(), (
+        "regenerate it: python -m dcts_spec.campaign.schema schemas/dcts-campaign.schema.json")
+    schema = json.loads(committed.read_text())
+    jsonschema.validate(yaml.safe_load(EXAMPLE.read_text()), schema)
+    jsonschema.validate(yaml.safe_load(CAMPAIGN), schema)
+    with pytest.raises(jsonschema.ValidationError):
+        jsonschema.validate(yaml.safe_load(CAMPAIGN.replace("{uniform: [0.5, 2.5]}", "{unifrom: [0.5, 2.5]}")), schema)
+
+
+def test_the_example_campaign_fits_the_benchmark_spec() -> None:
+    spec = ROOT / "specs" / "bench_iiwa14.yaml"
+    runner = SampleRunner(CampaignInputs(str(spec), spec.read_text(), str(EXAMPLE), EXAMPLE.read_text(), "unused"))
+    check_campaign(runner)  # its bodies, frames and metrics exist in the spec
+    assert runner.sampler.count == 1000 and "pushes[0].force.magnitude" in runner.sampler.swept()
 
 
 # -- engines, resuming, replaying ----------------------------------------------------------------------------

@@ -13,9 +13,9 @@ what is allowed.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any, Literal, get_args
 
-from pydantic import BeforeValidator, Field, model_validator
+from pydantic import BeforeValidator, Field, WithJsonSchema, model_validator
 
 from ..spec.controller import Formulation
 from ..spec.errors import shown
@@ -80,7 +80,15 @@ class Distribution(StrictModel):
         return (low_high[0], low_high[1]) if low_high is not None else (min(self.values), max(self.values))
 
 
-Value = Annotated[Distribution, BeforeValidator(_fixed_or_distribution)]
+_PAIR = {"type": "array", "items": {"type": "number"}, "minItems": 2, "maxItems": 2}
+_LIST = {"type": "array", "items": {"type": "number"}, "minItems": 1}
+# What an editor should accept: a number, or a mapping with one distribution.
+VALUE_SCHEMA = {"anyOf": [{"type": "number"}, {
+    "type": "object", "minProperties": 1, "maxProperties": 1, "additionalProperties": False,
+    "properties": {"uniform": _PAIR, "loguniform": _PAIR, "normal": _PAIR, "choice": _LIST, "grid": _LIST}}],
+    "description": "a number, or one of {uniform: [low, high]}, {loguniform: [low, high]}, {normal: [mean, std]}, "
+                   "{choice: [...]}, {grid: [...]}"}
+Value = Annotated[Distribution, BeforeValidator(_fixed_or_distribution), WithJsonSchema(VALUE_SCHEMA)]
 Vec3Value = tuple[Value, Value, Value]
 
 
@@ -166,6 +174,12 @@ def _formulation_or_choice(value: Any) -> Any:
     return {"fixed": value} if isinstance(value, str) else value
 
 
+_FORMULATIONS = {"enum": list(get_args(Formulation))}
+_FORMULATION_SCHEMA = {"anyOf": [_FORMULATIONS, {
+    "type": "object", "minProperties": 1, "maxProperties": 1, "additionalProperties": False,
+    "properties": {k: {"type": "array", "items": _FORMULATIONS, "minItems": 1} for k in ("choice", "grid")}}]}
+
+
 class FormulationSweep(StrictModel):
     """A formulation, or several (one C bundle each, built once)."""
 
@@ -184,7 +198,8 @@ class ControllerSweep(StrictModel):
     """Controller values: the formulation, and run-time parameters the spec's `parameters` section
     declares (set at the start of every run, so the one compiled bundle serves every sample)."""
 
-    formulation: Annotated[FormulationSweep, BeforeValidator(_formulation_or_choice)] | None = Field(
+    formulation: Annotated[FormulationSweep, BeforeValidator(_formulation_or_choice),
+                           WithJsonSchema(_FORMULATION_SCHEMA)] | None = Field(
         None, description="a formulation, or {choice: [...]} / {grid: [...]}", examples=[{"grid": ["dcts", "osc"]}])
     parameters: dict[str, Value | list[Value]] = Field(
         default_factory=dict, description="run-time parameter (as the bundle names it: ee_position.kp, "
