@@ -7,6 +7,7 @@ module (2 CPUs, no dashboard), to stay within the suite's time."""
 from __future__ import annotations
 
 import json
+import shlex
 import signal
 import subprocess
 import sys
@@ -304,20 +305,25 @@ def test_a_folder_dcts_did_not_write_is_refused(spec_file, campaign_file, tmp_pa
     assert sorted(p.name for p in tmp_path.iterdir()) == ["notes.txt"]
 
 
-def test_a_worst_case_replays_with_dcts_simulate(serial_run, tmp_path) -> None:
+def test_a_worst_case_replays_with_dcts_simulate(spec_file, campaign_file, serial_run) -> None:
     worst = serial_run.report["worst_cases"][0]
     assert worst["metric"] == "primary_rms_error"
     row = _rows(serial_run.folder)[worst["index"]]
     assert worst["value"] == max(r["primary_rms_error"] for r in _rows(serial_run.folder).values())
     replay = serial_run.folder / worst["replay"]
-    assert worst["command"].startswith(f"dcts simulate {replay}")
     scenario = yaml.safe_load(replay.read_text())["scenario"]
     assert scenario["parameters"][0]["values"]["tool_position.kp"] == row["controller.parameters.tool_position.kp"]
-    result = invoke("simulate", str(replay), "-o", str(tmp_path / "replay"), "--no-plots", "-q")
+    command = shlex.split(worst["command"])  # the report's command line, as given
+    assert command[:3] == ["dcts", "simulate", str(replay)]
+    result = invoke(*command[1:], "--no-plots", "-q")
     assert result.exit_code == 0, result.output
-    summary = json.loads((tmp_path / "replay" / "summary.json").read_text())
+    replayed_folder = Path(command[command.index("-o") + 1])
+    summary = json.loads((replayed_folder / "summary.json").read_text())
     replayed = metric_columns(summary, "tool_position")
     assert {k: v for k, v in replayed.items() if k not in TIMING} == {k: row[k] for k in replayed if k not in TIMING}
+    # the campaign's next report rewrites its replay specs, and leaves the replayed run alone
+    sweep(spec_file, campaign_file, serial_run.folder, SweepOptions(engine="serial", progress=False, plots=False))
+    assert replay.is_file() and (replayed_folder / "summary.json").is_file()
 
 
 def test_optimize_tunes_the_gain_and_resumes(ray_session, spec_file, tmp_path) -> None:

@@ -18,10 +18,8 @@ from typing import Any
 from ..spec.errors import SpecError
 from .document import Distribution
 from .report import LOWER_IS_WORSE
+from .results import JOURNAL, TRIALS
 from .sweep import CampaignSession, SweepOptions, SweepResult, campaign_session
-
-JOURNAL = "optuna.journal"
-TRIALS = "trials.jsonl"
 
 
 def search_space(session: CampaignSession) -> dict[str, Distribution | list[str]]:

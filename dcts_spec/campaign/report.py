@@ -18,6 +18,7 @@ from typing import Any
 from matplotlib.figure import Figure
 
 from .document import ReportSettings
+from .results import REPLAYS
 
 VIOLATIONS = ("max_joint_position_violation", "max_joint_velocity_violation", "max_torque_violation",
               "max_cartesian_violation", "max_collision_violation")
@@ -59,7 +60,7 @@ def worst_cases(rows: list[dict[str, Any]], metric: str, count: int) -> list[dic
 
 
 def replay_name(index: int) -> str:
-    return f"replays/sample_{index:06d}.yaml"
+    return f"{REPLAYS}/sample_{index:06d}.yaml"
 
 
 def summarize_metrics(rows: list[dict[str, Any]], metrics: list[str]) -> dict[str, dict[str, float | None]]:

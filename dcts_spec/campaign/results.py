@@ -21,8 +21,11 @@ from ..spec.errors import Diagnostic, SpecError
 
 STATE = "campaign.json"
 SAMPLES = "samples.jsonl"
-REPORT_NAMES = ("report.json", "report.html", "plots", "replays")
-NAMES = (STATE, SAMPLES, *REPORT_NAMES, "trials.jsonl")
+REPORT_NAMES = ("report.json", "report.html", "plots")
+REPLAYS = "replays"  # the worst cases' specs (and the runs a user replays into it)
+JOURNAL = "optuna.journal"  # an optimization's study
+TRIALS = "trials.jsonl"  # an optimization's trials, one line each
+NAMES = (STATE, SAMPLES, *REPORT_NAMES, REPLAYS, JOURNAL, TRIALS)
 
 
 def file_digest(path: Path) -> str:
@@ -96,10 +99,13 @@ class ResultsFolder:
                 f.flush()
 
     def clear_report(self) -> None:
-        """Remove the previous report (dcts wrote it: named in OWNED) before writing the new one."""
+        """Remove the previous report (dcts wrote it: named in OWNED) before writing the new one;
+        in replays/, only the specs (a replay run's output folder there stays)."""
         for name in REPORT_NAMES:
             path = self.folder / name
             if path.is_dir():
                 shutil.rmtree(path)
             elif path.exists():
                 path.unlink()
+        for spec in (self.folder / REPLAYS).glob("sample_*.yaml"):
+            spec.unlink()

@@ -19,7 +19,7 @@ from .document import Campaign, load_campaign
 from .engine import Pool, RayPool, SerialPool, Throughput, ray_session
 from .progress import sample_progress
 from .report import rates, replay_name, save_json, summarize_metrics, worst_cases, write_html, write_plots
-from .results import ResultsFolder
+from .results import REPLAYS, ResultsFolder
 from .runner import CampaignInputs, SampleRunner
 from .scenario import replay_yaml
 
@@ -146,7 +146,7 @@ class CampaignSession:
         settings = self.campaign.report
         folder = self.folder.folder
         self.folder.clear_report()
-        (folder / "replays").mkdir()
+        (folder / REPLAYS).mkdir(exist_ok=True)
         worst = []
         for metric in settings.metrics:
             for row in worst_cases(rows, metric, settings.worst):
@@ -174,7 +174,7 @@ class CampaignSession:
         data = self.driver.spec_data(self.driver.sample(index, self.parameters))
         comment = (f"Sample {index} (seed {row['seed']}) of the campaign {self.campaign_file} on {self.spec_file}: "
                    f"replay with\n  dcts simulate {path}")
-        if not path.exists():
+        if not path.exists():  # (a sample worst by several metrics)
             path.write_text(replay_yaml(data, self.spec_file, path, comment), encoding="utf-8")
         command = f"dcts simulate {shlex.quote(str(path))} -o {shlex.quote(str(path.with_suffix('')))}"
         return {"metric": metric, "value": row[metric], "index": index, "seed": row["seed"], "replay": name,
