@@ -131,6 +131,9 @@ def test_campaign_names_checked_against_the_spec(spec_file, tmp_path) -> None:
     assert result.exit_code == 1
     assert f"{campaign}:6:5: error: pushes[0].body: no frame 'link77' in the robot (did you mean 'link7'?)" in result.stderr
     assert f"{campaign}:21:" in result.stderr and "unknown metric 'primary_rms'" in result.stderr
+    campaign.write_text(CAMPAIGN.replace("bias: {normal: [0, 0.2]}", "bias: [0, 0.1, 0.2]"))
+    result = invoke("sweep", str(spec_file), "--campaign", str(campaign), "-o", str(tmp_path / "out"), "--serial")
+    assert result.exit_code == 1 and f"{campaign}:14:" in result.stderr and "3 values for 7 joints" in result.stderr
     # run-time parameters are checked on the compiled controller, which knows their names and ranges
     campaign.write_text(CAMPAIGN.replace("tool_position.kp: {loguniform: [50, 400]}", "tool_position.kq: 100\n    "
                                          "tool_position.kp: {uniform: [-5, 400]}"))

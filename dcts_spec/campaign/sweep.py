@@ -10,6 +10,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
 
+import numpy as np
+
 from ..codegen.cache import default_cache_dir
 from ..codegen.loader import CompiledController
 from ..phases import phase
@@ -225,6 +227,18 @@ def check_campaign(driver: SampleRunner) -> None:
         if task not in tasks:
             diagnostics.append(src.diagnostic(("report", "convergence", task), f"no task {task!r} in the spec"
                                               f"{did_you_mean(task, tasks)}; tasks: {', '.join(tasks)}"))
+    per_joint = [(("external_torque", "bias"), campaign.external_torque and campaign.external_torque.bias),
+                 (("initial_state", "offset"), campaign.initial_state and campaign.initial_state.offset)]
+    for at, value in per_joint:
+        if isinstance(value, list) and len(value) != robot.nv:
+            diagnostics.append(src.diagnostic(at, f"{len(value)} values for {robot.nv} joints: give one value per "
+                                              "joint, or one value drawn for each"))
+    state = campaign.initial_state
+    unbounded = [j for j, lo, hi in zip(robot.joint_names, robot.limits.q_min, robot.limits.q_max)
+                 if not (np.isfinite(lo) and np.isfinite(hi))]
+    if state is not None and state.within_limits is not None and unbounded:
+        diagnostics.append(src.diagnostic(("initial_state", "within_limits"), f"joint {unbounded[0]} has no finite "
+                                          "position limits to draw within: give an offset instead"))
     if spec.scenario is None and campaign.duration is None:
         diagnostics.append(src.diagnostic((), "the spec has no scenario: give the runs' `duration` here"))
     if diagnostics:
