@@ -16,7 +16,7 @@ from typer.testing import CliRunner
 from dcts_spec import cli
 from dcts_spec.cli import app
 from dcts_spec.formulations import FORMULATIONS
-COMMANDS = ("validate", "schema", "simulate", "compare", "compile", "bench", "robots", "describe", "init")
+COMMANDS = ("validate", "schema", "simulate", "compare", "sweep", "compile", "bench", "robots", "describe", "init")
 WRITERS = ("schema", "simulate", "compare", "compile")
 
 runner = CliRunner()
