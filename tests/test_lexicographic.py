@@ -31,7 +31,7 @@ from dcts_spec.robot.builtin import example_robot_data_dir
 from dcts_spec.spec import load_spec_text
 from dcts_spec.validate import validate_spec
 from formulation_cases import CAMPAIGN, HOME, TOOL, State, check_bounds, numeric_tasks, spec_text
-from lexicographic_reference import LexicographicSolution, lexicographic_solution, task_levels
+from lexicographic_reference import LexicographicSolution, lexicographic_solution, solve_highs, task_levels
 from reference import closed_form_hierarchy, dynamics
 
 DT = 0.001  # controller.period (default)
@@ -445,6 +445,23 @@ def test_regression_panda_cartesian_floor():
     assert scaled_states >= 5, f"the premise: the bound scales the position task in some states ({scaled_states})"
 
 
+def _saved_qp(name: str) -> tuple[list[np.ndarray], Structure]:
+    """QP data saved by a test's author (tests/data/NAME.npz): the cascade's arguments and structure."""
+    data = np.load(Path(__file__).parent / "data" / f"{name}.npz")
+    bends = [tuple(data[f"bend{k}"].tolist()) for k in range(len(data["scaling"]))]
+    structure = Structure(range(*data["bound_rows"]), tuple(zip(data["scaling"].tolist(), bends)))
+    return [data[k] if k in ("H", "A") else data[k].ravel() for k in ("H", "f", "A", "lbx", "ubx", "lba", "uba")], structure
+
+
+def _converged(monkeypatch, args, structure) -> np.ndarray:
+    """The cascade with its proximal iterations run to a tolerance of 1e-12."""
+    from dcts_spec.solve import lexicographic
+
+    monkeypatch.setattr(lexicographic, "PROXIMAL_TOLERANCE", 1e-12)
+    monkeypatch.setattr(lexicographic, "PROXIMAL_ITERATIONS", 300)
+    return solve_lexicographic(*args, structure)
+
+
 def test_a_stage_stops_when_only_noise_moves(monkeypatch):
     """QP data of a closed-loop state of specs/bench_iiwa14.yaml where a stage ran all 30 of its
     QPs: a variable its objective does not see moved by ~3e-10 (DAQP's resolution) each time, just
@@ -452,16 +469,39 @@ def test_a_stage_stops_when_only_noise_moves(monkeypatch):
     the one of proximal iterations run to a tolerance of 1e-12."""
     from dcts_spec.solve import lexicographic
 
-    data = np.load(Path(__file__).parent / "data" / "stalled_scale_stage.npz")
-    structure = Structure(range(*data["bound_rows"]), ((int(data["scaling"][0]), tuple(data["bend0"].tolist())),
-                                                      (int(data["scaling"][1]), tuple(data["bend1"].tolist()))))
-    args = [data[k].ravel() if k != "H" and k != "A" else data[k] for k in ("H", "f", "A", "lbx", "ubx", "lba", "uba")]
+    args, structure = _saved_qp("stalled_scale_stage")
     solves = []
     original = lexicographic.daqp_qp
     monkeypatch.setattr(lexicographic, "daqp_qp", lambda *a: solves.append(1) or original(*a))
     x = solve_lexicographic(*args, structure)
     assert len(solves) <= 10
-    monkeypatch.setattr(lexicographic, "PROXIMAL_TOLERANCE", 1e-12)
-    monkeypatch.setattr(lexicographic, "PROXIMAL_ITERATIONS", 300)
-    exact = solve_lexicographic(*args, structure)
-    assert _rel(x, exact) < 1e-8
+    assert _rel(x, _converged(monkeypatch, args, structure)) < 1e-8
+
+
+def test_a_bend_stage_goes_on_where_daqp_fails_at_a_smaller_step():
+    """QP data of a golden state of TALOS's torso and arms (16 joints, the URDF's torque limits;
+    scripts/bench_sizes.py's talos16 row): a bound relaxed, then the top level bent. DAQP called
+    the bend stage infeasible at ρ = 0.01 after solving it at 1 and 0.1; the stage stopped there,
+    its scaling 0.5 % off, and C and Python (which fail at different ρ) disagreed. Going on at the
+    last ρ that worked, the scaling is within 1e-5 of HiGHS's: the least bend (a QP), then the
+    largest scaling with it (an LP), on the relaxed bounds."""
+    from dcts_spec.solve.lexicographic import Cascade
+
+    args, structure = _saved_qp("bend_after_relaxation")
+    (s, bend), = structure.priorities
+    x = solve_lexicographic(*args, structure)
+    cascade = Cascade(*args, structure)
+    assert cascade.levels() is None and cascade.relax()  # (the relaxation's LP has one solution here)
+    H, f, A, lbx, ubx = args[:5]
+    rows = (A, cascade.lba, cascade.uba)
+    weights = np.zeros(lbx.size)
+    weights[list(bend)] = 1.0
+    least, status = solve_highs(np.zeros(lbx.size), *rows, lbx, ubx, Q=np.diag(weights))
+    assert least is not None, status
+    lo, hi = lbx.copy(), ubx.copy()
+    lo[list(bend)] = hi[list(bend)] = least[list(bend)]
+    scale = np.zeros(lbx.size)
+    scale[s] = 1.0
+    best, status = solve_highs(scale, *rows, lo, hi, sense_max=True)
+    assert best is not None, status
+    assert abs(x[s] - best[s]) <= 1e-5 * abs(best[s]), (x[s] / ubx[s], best[s] / ubx[s])

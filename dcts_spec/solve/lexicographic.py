@@ -196,12 +196,21 @@ class Cascade:
         best_bounds = None if weights.any() else self._best_bounds(linear, lbx, ubx)
         seen = (weights != 0.0) | (linear != 0.0)
         hessian, hessian_rho = None, None
+        floor, solved_rho = step, None  # ρ stays ≥ floor; the ρ of the last QP DAQP solved
         for _ in range(PROXIMAL_ITERATIONS):
             if rho != hessian_rho:  # (ρ stays at `step` once there: the same Hessian)
                 hessian, hessian_rho = np.diag(1.0 + weights / rho), rho
             solved = self._solve(hessian, linear / rho - center, lbx, ubx)
             if solved is None:
-                return x
+                if solved_rho is None or rho >= solved_rho:
+                    return x
+                # DAQP failed at a smaller ρ than the last that worked (it called a feasible bend
+                # stage on a barely relaxed bound infeasible at I + I/ρ of condition 100, then
+                # the iterate stopped 2 steps short and C and Python differed by 0.5 %): go on at
+                # that ρ; the proximal-point method converges at any fixed ρ, only more slowly
+                floor = rho = solved_rho
+                continue
+            solved_rho = rho
             previous, x = x, solved
             if self._negligible(x - center, x):
                 return x
@@ -218,7 +227,7 @@ class Cascade:
             if previous is not None and not spare_noise:
                 d = x - previous
                 center = x + self._extrapolation(x, d, weights, linear, lbx, ubx) * d
-            rho = max(0.1 * rho, step)
+            rho = max(0.1 * rho, floor)
         return x
 
     @staticmethod
