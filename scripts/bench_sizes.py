@@ -89,10 +89,10 @@ def model_spec(model: Model) -> str:
     gains: {{kp: 10, kd: 6}}
     reference: {{q: {_list(q0)}}}""")
     locked_text = ", ".join(f"{n}: {v:.6g}" for n, v in locked.items())
-    # Twice the URDF's torques: at the URDF's (TALOS's wrist: 3 Nm) a quarter of the golden
-    # vectors are relaxed, and with 28 joints in 3 of them the cascade's last stage fails after a
-    # bend (DAQP calls a thin relaxed set empty) and C and Python return different stage answers:
-    # the bundle fails its golden test (open; 16 joints pass since 5467cf5).
+    # Twice the URDF's torques, as the table was first measured: at the URDF's (TALOS's wrist:
+    # 3 Nm) a quarter of the golden vectors are relaxed. 16 joints pass their golden test at
+    # either since 5467cf5; 28 joints at neither (open): in a few relaxed states the top level's
+    # bend stage does not converge in its 30 steps, and C and Python return different iterates.
     torque = _list(TORQUE_MARGIN * reduced.effortLimit)
     return f"""version: 1
 name: sizes_{model.key}
