@@ -104,12 +104,12 @@ def data_function(problem: ControlProblem, law: ControlLaw, name: str = "qp_data
         lba, uba = qp.lba, qp.uba
         torque_matrix, scaling_matrix = ca.mtimes(torque_matrix, D), ca.mtimes(scaling_matrix, D)
     torque = law.torque
-    if law.acceleration is not None:  # q̈ = a − M⁻¹τ_ext
+    if law.acceleration is not None:  # q̈ = a − M⁻¹τ_ext, from the map the QP formulation has at hand
         ddq0 = law.acceleration.offset - ca.mtimes(problem.mass_matrix_inverse, problem.external_torque)
-        Q = ca.mtimes(law.acceleration.matrix, D) if nx else ca.SX(problem.n, 0)
-    else:
+        Q = ca.mtimes(law.acceleration.matrix, D)
+    else:  # (a closed form: Q has no column)
         ddq0 = problem.commanded_acceleration(torque.offset)
-        Q = ca.mtimes(problem.mass_matrix_inverse, torque_matrix) if nx else ca.SX(problem.n, 0)
+        Q = ca.mtimes(problem.mass_matrix_inverse, torque_matrix)
     P, p0 = ca.SX(0, nx), ca.SX(0, 1)
     if law.least_squares_task is not None:
         P, p0 = ca.mtimes(law.least_squares_task[0], D), law.least_squares_task[1]

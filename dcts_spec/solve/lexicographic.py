@@ -123,12 +123,13 @@ def nominal_point(ubx: np.ndarray, structure: Structure) -> np.ndarray:
 
 def unbounded_solution(H: np.ndarray, f: np.ndarray, ubx: np.ndarray, structure: Structure) -> np.ndarray:
     """The lexicographic solution when no row constrains, in closed form: every level met, and the
-    variables after the levels' own (DCTS: z, which have no bounds) minimizing ½xᵀHx + fᵀx:
+    other variables (DCTS: z, after the levels' own, with no bounds) minimizing ½xᵀHx + fᵀx:
     H_zz z = −(f_z + H_z,levels x_levels). What an over-constrained lowest level's scaling is
     reported against (`Controller`); one small Cholesky instead of a QP."""
     x = nominal_point(ubx, structure)
-    first = max((max([s, *bend]) for s, bend in structure.priorities), default=-1) + 1
-    x[first:] = -np.linalg.solve(H[first:, first:], f[first:] + H[first:, :first] @ x[:first])
+    levels = structure.levels_above[-1]
+    free = np.setdiff1d(np.arange(x.size), levels)
+    x[free] = -np.linalg.solve(H[np.ix_(free, free)], f[free] + H[np.ix_(free, levels)] @ x[levels])
     return x
 
 
@@ -223,10 +224,10 @@ class Cascade:
             # the last stage failed. (Elsewhere the rule costs optimality: extrapolating along the
             # other variables is what lets a slowly moving level gain, 28 of 3,000 closed-loop
             # states of the bench spec ended up to 3e-5 lower in their top level's scaling.)
-            spare_noise = self.structure.spare_variables and previous is not None and self._negligible((x - previous)[seen], x)
-            if previous is not None and not spare_noise:
+            if previous is not None:
                 d = x - previous
-                center = x + self._extrapolation(x, d, weights, linear, lbx, ubx) * d
+                if not (self.structure.spare_variables and self._negligible(d[seen], x)):
+                    center = x + self._extrapolation(x, d, weights, linear, lbx, ubx) * d
             rho = max(0.1 * rho, floor)
         return x
 
