@@ -391,6 +391,9 @@ def generate_sources(
     if any(list(b) != list(range(b[0], b[0] + len(b))) for b in bends) or any(
             a[-1] + 1 != b[0] for a, b in zip(bends, bends[1:])):
         raise CodegenError("the C cascade expects each level's bend in consecutive variables")
+    level_variables = sorted(v for p in priorities for v in (p.scaling, *p.bend))
+    if level_variables != list(range(len(level_variables))):
+        raise CodegenError("the C cascade (ctl_unbounded) expects the levels' variables before all others")
     solver_bytes = SOLVER_STORAGE_BYTES * (3 if nr else 2)  # see C_SOLVERS in controller.c.in
     tau_max = np.asarray(controller.tau_max, dtype=float)
     damping = controller.problem.vector("fallback_damping")
