@@ -505,3 +505,73 @@ def test_a_bend_stage_goes_on_where_daqp_fails_at_a_smaller_step():
     best, status = solve_highs(scale, *rows, lo, hi, sense_max=True)
     assert best is not None, status
     assert abs(x[s] - best[s]) <= 1e-5 * abs(best[s]), (x[s] / ubx[s], best[s] / ubx[s])
+
+
+# -- the lowest level's scaling and the final QP in one (Cascade.finish_lowest) ---------------------
+
+
+def _lowest_gives_way(robot: str, count: int):
+    """(cascade, lbx, ubx) of states of the 3-level case where the levels above the lowest are
+    met and the lowest cannot be: the bounds with those levels fixed, the lowest unbent."""
+    from dcts_spec.solve.lexicographic import Cascade
+
+    cs = case(robot, 3)
+    c = cs.controller
+    found = []
+    for st in near_bound_states(robot, cs.model, count, seed=23):
+        data = c.evaluate_data(st.q, st.dq, st.tau_ext)
+        args = [data[k] if k in ("H", "A") else data[k].ravel() for k in ("H", "f", "A", "lbx", "ubx", "lba", "uba")]
+        cascade = Cascade(*args, c._structure)
+        lowest = len(c._structure.priorities) - 1
+        lbx, ubx = cascade._above_nominal(lowest)
+        if cascade.final(lowest, lbx, ubx) is None and cascade.scale(lowest, lbx, ubx) is not None:
+            found.append((cascade, lbx, ubx))
+    return found
+
+
+def _highs_scale_then_final(cascade, lbx, ubx) -> np.ndarray:
+    """The two stages by HiGHS: the largest s of the lowest level (an LP), then ½xᵀHx + fᵀx with it."""
+    s, _ = cascade.structure.priorities[-1]
+    rows = (cascade.A, cascade.lba, cascade.uba)
+    e = np.zeros(lbx.size)
+    e[s] = 1.0
+    best, status = solve_highs(e, *rows, lbx, ubx, sense_max=True)
+    assert best is not None, status
+    lo, hi = lbx.copy(), ubx.copy()
+    lo[s] = hi[s] = best[s]
+    final, status = solve_highs(cascade.f, *rows, lo, hi, Q=cascade.H)
+    assert final is not None, status
+    return final
+
+
+@pytest.mark.parametrize("robot", ROBOTS)
+def test_lowest_level_scaled_and_finished_in_one_checked_qp(robot, monkeypatch):
+    """Where only the lowest level gives way, one QP with its scaling weighted (an exact penalty)
+    and one proximal step that checks it replace the scaling stage and the final QP: the same
+    answer as HiGHS's two stages, in two DAQP solves (20 of 20 states). With a weight far too small
+    to be exact (1 instead of 1e6), the check sees it and the two stages run: the answer is the same.
+    (Too small a weight, 1e-6, would move the checking step too little to see.)"""
+    from dcts_spec.solve import lexicographic
+
+    states = _lowest_gives_way(robot, 150)
+    assert len(states) >= 5, f"the premise: states where only the lowest level gives way ({len(states)})"
+    solves = []
+    original = lexicographic.daqp_qp
+    monkeypatch.setattr(lexicographic, "daqp_qp", lambda *a: solves.append(1) or original(*a))
+    two_solves = 0
+    for cascade, lbx, ubx in states:
+        solves.clear()
+        x = cascade.finish_lowest(lbx, ubx)
+        two_solves += len(solves) == 2
+        reference = _highs_scale_then_final(cascade, lbx, ubx)
+        assert _rel(x, reference) < 1e-6, (x, reference)
+    assert two_solves >= 0.75 * len(states), f"checked at once in {two_solves} of {len(states)} states"
+    monkeypatch.setattr(lexicographic, "FINISH_WEIGHT", 1.0)
+    caught = 0
+    for cascade, lbx, ubx in states:
+        solves.clear()
+        x = cascade.finish_lowest(lbx, ubx)
+        caught += len(solves) > 2  # the check failed, and the stages ran
+        assert _rel(x, _highs_scale_then_final(cascade, lbx, ubx)) < 1e-6
+    # (with so small a weight the answer's scaling can still be the largest, by chance: 2 of 20)
+    assert caught >= 0.5 * len(states), f"the check failed in {caught} of {len(states)} states"

@@ -97,6 +97,12 @@ def run_c_harness(exe: Path, states: list[State], work: Path, tag: str) -> dict:
         "fallback": _stats(fallback),
         "statuses": {STATUS_NAMES.get(int(s), str(int(s))): int((status == s).sum()) for s in np.unique(status)},
         "qp_solves_max": int(solves.max()),
+        "qp_solves": {"mean": float(solves.mean()), "median": float(np.median(solves))},
+        # where the median step's time goes: the median step of the states that took k solves,
+        # for the counts of at least 5 % of the states
+        "step_by_solves": [{"solves": int(k), "share": float((solves == k).mean()),
+                            "median_us": float(np.median(step[solves == k])) / 1e3}
+                           for k in np.unique(solves) if (solves == k).mean() >= 0.05],
         "qp_iterations": {"mean": float(iterations.mean()), "max": int(iterations.max()),
                           "p99": float(np.percentile(iterations, 99))},
     }
@@ -338,6 +344,9 @@ def format_report(r: dict) -> str:
         f"the {'QP data' if data_share > 0.5 else 'QP solve'} dominates: qp_data is {100 * data_share:.0f}% of the median step",
         f"QP: {c['qp_iterations']['mean']:.1f} DAQP iterations on average, max {c['qp_iterations']['max']}, "
         f"at most {c['qp_solves_max']} solves per step; statuses {c['statuses']}",
+        f"QP solves per step (closed loop): median {c['qp_solves']['median']:.0f}, mean {c['qp_solves']['mean']:.1f}; "
+        "median step by solves: " + ", ".join(f"{b['solves']}: {b['median_us']:.2f} µs ({100 * b['share']:.0f} %)"
+                                              for b in c["step_by_solves"]),
         f"workspace {r['workspace_bytes']} bytes (DAQP's arrays {r['daqp_workspace_bytes']} of them), "
         f"heap calls {r['heap_calls']} (init and step; `make nomalloc`)",
         ".text bytes: " + ", ".join(f"{k} {v}" for k, v in r["text_bytes"].items())
