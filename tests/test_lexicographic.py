@@ -549,7 +549,8 @@ def test_lowest_level_scaled_and_finished_in_one_checked_qp(robot, monkeypatch):
     """Where only the lowest level gives way, one QP with its scaling weighted (an exact penalty)
     and one proximal step that checks it replace the scaling stage and the final QP: the same
     answer as HiGHS's two stages, in two DAQP solves (20 of 20 states). With a weight far too small
-    to be exact (1 instead of 1e6), the check sees it and the two stages run: the answer is the same.
+    to be exact (1 instead of 1e6, then 1e8), the check sees it and the two stages run: the answer
+    is the same.
     (Too small a weight, 1e-6, would move the checking step too little to see.)"""
     from dcts_spec.solve import lexicographic
 
@@ -566,7 +567,7 @@ def test_lowest_level_scaled_and_finished_in_one_checked_qp(robot, monkeypatch):
         reference = _highs_scale_then_final(cascade, lbx, ubx)
         assert _rel(x, reference) < 1e-6, (x, reference)
     assert two_solves >= 0.75 * len(states), f"checked at once in {two_solves} of {len(states)} states"
-    monkeypatch.setattr(lexicographic, "FINISH_WEIGHT", 1.0)
+    monkeypatch.setattr(lexicographic, "FINISH_WEIGHTS", (1.0,))
     caught = 0
     for cascade, lbx, ubx in states:
         solves.clear()

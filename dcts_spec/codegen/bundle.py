@@ -467,7 +467,7 @@ def generate_sources(
         "MAX_EXTRAPOLATION": c_double(lexicographic.MAX_EXTRAPOLATION),
         "EXTRAPOLATION_MARGIN": c_double(lexicographic.EXTRAPOLATION_MARGIN),
         "RELAX_MARGIN": c_double(lexicographic.RELAX_MARGIN),
-        "FINISH_WEIGHT": c_double(lexicographic.FINISH_WEIGHT),
+        "FINISH_WEIGHTS": ", ".join(c_double(w) for w in lexicographic.FINISH_WEIGHTS),
         "MAX_STAGE_SOLVES": lexicographic.PROXIMAL_ITERATIONS,
         "WORKSPACE_FIELDS": header_fields(fields),
         "HARD_END": qp.rows_of(HARD).stop if qp is not None else 0,
