@@ -301,8 +301,9 @@ class Cascade:
         short of the largest it moves by about the gap or K/curvature, whichever is smaller, so
         K must be large for the check to see a small gap, as ρ must be small in `scale`); where
         it moves, K was too small: a larger one, then the two stages. One QP if s reaches 1, two
-        if it is smaller, instead of three or more. None if no s ∈ [0, 1] is feasible; `witness`: a feasible point
-        (the bend's answer), whose s the final QP takes if DAQP fails the stages."""
+        if it is smaller, instead of three or more. None if no s ∈ [0, 1] is feasible.
+        `witness`: a feasible point (the bend's answer), whose s the final QP takes if DAQP fails
+        the stages."""
         if self.structure.spare_variables:
             # K's rounding, in the directions of the spare variables that H barely sees, moved
             # them by ~1e3 (scaled) and C and Python parted: the QPs as before (`levels` tries
@@ -372,8 +373,7 @@ class Cascade:
                 lbx[bend] = ubx[bend] = 0.0
                 # with every level above nominal, `_first_to_scale` (or for the lowest level, the
                 # first QP) found this stage infeasible
-                infeasible = i > 0 and self._nominal_through(i, lbx, ubx)
-                if infeasible:
+                if i > 0 and self._nominal_through(i, lbx, ubx):
                     x = None
                 else:
                     x = self.finish_lowest(lbx, ubx) if lowest else self.scale(i, lbx, ubx)
