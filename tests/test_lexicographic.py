@@ -576,3 +576,49 @@ def test_lowest_level_scaled_and_finished_in_one_checked_qp(robot, monkeypatch):
         assert _rel(x, _highs_scale_then_final(cascade, lbx, ubx)) < 1e-6
     # (with so small a weight the answer's scaling can still be the largest, by chance: 2 of 20)
     assert caught >= 0.5 * len(states), f"the check failed in {caught} of {len(states)} states"
+
+
+# -- DAQP on the free variables only (FixedEliminated) ----------------------------------------------
+
+
+@pytest.mark.parametrize("robot", ROBOTS)
+def test_fixed_variables_eliminated_give_the_qp_with_them_fixed(robot):
+    """DAQP solves for the free variables only: the answer is HiGHS's on the whole QP with the fixed
+    variables as equal bounds, in the stages' layouts (the levels above fixed, the lowest free to
+    scale; every level fixed; none), with DAQP seeing only the free columns. The same objective
+    to 1e-10; x to 1e-5, as the QPs are flat along some directions (objectives equal to 12 digits
+    where x differed by 7e-7)."""
+    from dcts_spec.solve.lexicographic import FixedEliminated, clip_to_daqp, daqp_qp
+
+    states = _lowest_gives_way(robot, 150)
+    assert states, "the premise: states where the lowest level gives way"
+    compared = 0
+    for cascade, lbx, ubx in states[:8]:
+        s, _ = cascade.structure.priorities[-1]
+        scaled = cascade.scale(len(cascade.structure.priorities) - 1, lbx, ubx)
+        everything = lbx.copy(), ubx.copy()
+        everything[0][s] = everything[1][s] = scaled[s]  # every level fixed: only z free
+        for lo, hi in ((lbx, ubx), everything, (cascade.lbx, cascade.ubx)):
+            lower, upper = np.empty(lo.size + cascade.lba.size), np.empty(lo.size + cascade.lba.size)
+            for source, target in ((lo, lower[: lo.size]), (hi, upper[: lo.size]), (cascade.lba, lower[lo.size :]),
+                                   (cascade.uba, upper[lo.size :])):
+                clip_to_daqp(source, target)
+            reduced = FixedEliminated.of(cascade.A, lower, upper)
+            assert reduced.A.shape[1] == int(np.sum(lo != hi)) == reduced.free.size
+            x, flag = daqp_qp(cascade.H, cascade.f, reduced)
+            reference, status = solve_highs(cascade.f, cascade.A, cascade.lba, cascade.uba, lo, hi, Q=cascade.H)
+            if reference is None:  # the whole QP with every level nominal is infeasible here, as it should be
+                assert x is None and status == "Infeasible", (flag, status)
+                continue
+            assert x is not None, flag
+            assert np.array_equal(x[lo == hi], lo[lo == hi])
+            objective = [0.5 * v @ cascade.H @ v + cascade.f @ v for v in (x, reference)]
+            assert abs(objective[0] - objective[1]) <= 1e-10 * max(1.0, abs(objective[1])), objective
+            assert _rel(x, reference) < 1e-5, (x, reference)
+            compared += 1
+    assert compared >= 2 * min(len(states), 8)
+    # no variable free: the fixed point, for the caller to check on the rows
+    point = cascade.nominal.copy()
+    lower = np.concatenate((point, np.full(cascade.lba.size, -1e30)))
+    x, flag = daqp_qp(cascade.H, cascade.f, FixedEliminated.of(cascade.A, lower, lower.copy()))
+    assert flag == 1 and np.array_equal(x, point)

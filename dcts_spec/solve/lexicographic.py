@@ -27,7 +27,8 @@ condition number ~1e8, and DAQP then returned "optimal" with a torque limit cros
 and called feasible stages infeasible). Each QP is an ordinary one, which DAQP solves exactly
 (it refines its primal solution); its hierarchical mode (`break_points`) was measured to miss
 the largest feasible scaling and to cross hard rows in ill-conditioned states (see
-docs/formulations.md).
+docs/formulations.md). DAQP sees each QP with its fixed variables eliminated
+(`FixedEliminated`): the variables a stage leaves free, 2–3 of the bench spec's 9.
 
 The generated C code runs the same cascade on the same DAQP.
 """
@@ -45,8 +46,6 @@ import numpy as np
 # the scaled problem; a bounded iteration count; no elimination of equalities (it allocates).
 DAQP_SETTINGS = {"primal_tol": 1e-8, "iter_limit": 1000, "eq_reduction": -1}
 DAQP_INF = 1e30  # DAQP's "no bound"
-DAQP_EQUALITY = 5  # sense: active and immutable
-_SENSE_EQUALITY, _SENSE_INEQUALITY = np.intc(DAQP_EQUALITY), np.intc(0)  # (np.where then gives DAQP's type)
 # The proximal-point stages (see Cascade._proximal): step ρ, at most this many solves, and when
 # a step is small enough (relative) to stop. The scaling's objective is linear: its Hessian stays
 # the identity whatever ρ, and a long step reaches the largest scaling at once. The bend's
@@ -113,13 +112,68 @@ def clip_to_daqp(values: np.ndarray, out: np.ndarray) -> None:
     np.minimum(np.maximum(values, -DAQP_INF, out=out), DAQP_INF, out=out)
 
 
-def daqp_qp(H, f, A, lower, upper) -> tuple[np.ndarray | None, int]:
-    """One ordinary QP: min ½xᵀHx + fᵀx, lower ≤ [x; Ax] ≤ upper (equal ends: an equality), the
-    bounds within ±DAQP_INF (`clip_to_daqp`). Returns x (None if DAQP found no solution) and its
-    exit flag."""
-    sense = np.where(lower == upper, _SENSE_EQUALITY, _SENSE_INEQUALITY)
-    x, _, flag, _ = daqp.solve(np.ascontiguousarray(H), np.ascontiguousarray(f), np.ascontiguousarray(A),
-                               upper, lower, sense, **DAQP_SETTINGS)
+@dataclass(frozen=True)
+class FixedEliminated:
+    """A QP's rows and bounds with its fixed variables (equal bounds: the levels a stage holds)
+    eliminated: DAQP solves for the free ones, min ½x_fᵀH_ff x_f + (f_f + H_fc x_c)ᵀx_f with the
+    rows shifted by A_c x_c. The same solution (H is positive definite), but DAQP's setup (the
+    Cholesky of H, A R⁻¹) and working set shrink from every variable to the 2–3 a stage leaves
+    free, instead of holding the others (7 of the bench spec's 9) as equalities."""
+
+    free: np.ndarray  # indices of the free variables
+    point: np.ndarray  # the fixed variables' values, 0 at the free ones
+    A: np.ndarray  # A's columns of the free variables
+    lower: np.ndarray  # DAQP's bounds: [x_f; A_f x_f]
+    upper: np.ndarray
+    hessian_index: tuple[np.ndarray, np.ndarray]  # H_ff = H[hessian_index]
+
+    @classmethod
+    def of(cls, A: np.ndarray, lower: np.ndarray, upper: np.ndarray,
+           layouts: dict[bytes, tuple] | None = None) -> FixedEliminated:
+        """`lower ≤ [x; Ax] ≤ upper` (within ±DAQP_INF, `clip_to_daqp`) with the fixed variables out.
+        `layouts`: what depends only on which variables are fixed, kept across calls on the same A
+        (a cascade's stages fix a few sets of variables over and over)."""
+        n = A.shape[1]
+        fixed = lower[:n] == upper[:n]
+        key = fixed.tobytes()
+        layout = None if layouts is None else layouts.get(key)
+        if layout is None:
+            free = np.flatnonzero(~fixed)
+            layout = free, np.ascontiguousarray(A[:, free]), np.ix_(free, free)
+            if layouts is not None:
+                layouts[key] = layout
+        free, A_free, index = layout
+        if free.size == n:
+            point = np.zeros(n)
+        else:
+            point = np.where(fixed, lower[:n], 0.0)  # (0 at the free variables: A x sees the fixed ones only)
+            shift = A @ point
+            lower = np.concatenate((lower[free], lower[n:] - shift))
+            upper = np.concatenate((upper[free], upper[n:] - shift))
+        return cls(free, point, A_free, lower, upper, index)
+
+
+def daqp_qp(H: np.ndarray, f: np.ndarray, qp: FixedEliminated) -> tuple[np.ndarray | None, int]:
+    """One ordinary QP: min ½xᵀHx + fᵀx on the rows and bounds of `qp` (equal ends: an equality),
+    solved by DAQP for the free variables. Returns x (None if DAQP found no solution) and its exit
+    flag; with no variable free, the fixed point, for the caller's check of the rows."""
+    free = qp.free
+    if free.size == f.size:
+        return _daqp(H, f, qp)
+    x = qp.point.copy()
+    if not free.size:
+        return x, 1
+    solved, flag = _daqp(H[qp.hessian_index], (f + H @ x)[free], qp)
+    if solved is None:
+        return None, flag
+    x[free] = solved
+    return x, flag
+
+
+def _daqp(H: np.ndarray, f: np.ndarray, qp: FixedEliminated) -> tuple[np.ndarray | None, int]:
+    # (no sense: DAQP takes the rows with equal ends for equalities itself, as in the C runtime)
+    x, _, flag, _ = daqp.solve(np.ascontiguousarray(H), np.ascontiguousarray(f), qp.A, qp.upper, qp.lower,
+                               **DAQP_SETTINGS)
     if flag != 1 or not np.isfinite(x).all():
         return None, int(flag)
     return np.asarray(x, dtype=float), int(flag)
@@ -159,6 +213,7 @@ class Cascade:
         # DAQP's bounds of [x; Ax], clipped: the rows' part is set once (and after `relax`), the
         # variables' part by each QP
         self._lower, self._upper = np.empty(lbx.size + lba.size), np.empty(lbx.size + lba.size)
+        self._layouts: dict[bytes, tuple] = {}  # FixedEliminated.of's
         self._set_row_bounds()
 
     def _set_row_bounds(self) -> None:
@@ -171,7 +226,7 @@ class Cascade:
         lower, upper = self._lower, self._upper
         clip_to_daqp(lbx, lower[: lbx.size])
         clip_to_daqp(ubx, upper[: ubx.size])
-        x, _ = daqp_qp(H, f, self.A, lower, upper)
+        x, _ = daqp_qp(H, f, FixedEliminated.of(self.A, lower, upper, self._layouts))
         if x is None:
             return None
         value = np.concatenate([x, self.A @ x])
@@ -390,7 +445,7 @@ class Cascade:
                 witness = x
             # fixed exactly: a band would let the levels below move it within the band, and in
             # ill-conditioned states they gain far more than its width (a bend 40 % smaller for a
-            # band of 1e-7, measured); DAQP takes fixed variables as equalities
+            # band of 1e-7, measured); a fixed variable leaves DAQP's QP (`FixedEliminated`)
             lbx[s] = ubx[s] = min(max(witness[s], self.lbx[s]), self.ubx[s])
             if self._nominal_through(i + 1, lbx, ubx):
                 continue  # every level so far nominal: the first QP, which was infeasible
