@@ -30,7 +30,7 @@ from __future__ import annotations
 
 import casadi as ca
 
-from ..symbolic.linalg import null_space_basis
+from ..symbolic.linalg import null_space_basis, symmetric_product
 from .hierarchy import NULL_SPACE_REGULARIZATION, least_squares_objective, level_structure, recursive_hierarchy
 from .problem import ControlProblem
 from .qp import INF, Affine, ControlLaw, PriorityVariables, with_limits
@@ -72,6 +72,7 @@ def dcts(problem: ControlProblem) -> ControlLaw:
         H[i, i] = 1.0  # s and δ are fixed by their levels before this objective: it only needs H ≻ 0
     f[:k] = -1.0
     notes = []
+    mass_acceleration = None
     if nz:
         # The freedom left by the exact levels is null([J₁; …; J_k]) = range(N_k); a basis of it
         # keeps the QP small (N_k z would carry n variables for n − Σmᵢ directions).
@@ -82,20 +83,21 @@ def dcts(problem: ControlProblem) -> ControlLaw:
         matrix[:, z] = Z
         if structure.least_squares_last:
             last = levels[-1]
-            Hx, fx = least_squares_objective(last, Affine(a.offset, matrix), problem.mass_matrix)
+            mass_acceleration = ca.mtimes(problem.mass_matrix, matrix)  # (the torque rows' too)
+            Hx, fx = least_squares_objective(last, Affine(a.offset, matrix), mass_acceleration)
             H += Hx
             f += fx
             notes.append(f"priority {last.priority} is over-constrained: solved in least squares")
         else:
-            H[z, z] = ca.mtimes([Z.T, problem.mass_matrix, Z])
+            H[z, z] = symmetric_product(Z, ca.mtimes(problem.mass_matrix, Z))
         if released:
             complement = ca.SX.eye(n) - N
-            H[z, z] += NULL_SPACE_REGULARIZATION * ca.mtimes(complement.T, complement)
+            H[z, z] += NULL_SPACE_REGULARIZATION * symmetric_product(complement, complement)
     acceleration = Affine(a.offset, matrix)
 
     lbx = [0.0] * k + [-INF] * (nx - k)
     ubx = [1.0] * k + [INF] * (nx - k)
-    qp, torque = with_limits(problem, acceleration, H, f, lbx, ubx, variables, priorities)
+    qp, torque = with_limits(problem, acceleration, H, f, lbx, ubx, variables, priorities, mass_acceleration)
     scaling = Affine(ca.SX.zeros(len(levels)), ca.SX(len(levels), nx))
     for i in range(k):
         scaling.matrix[i, i] = 1.0

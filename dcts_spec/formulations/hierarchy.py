@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from ..symbolic.linalg import cholesky, cholesky_solve, spd_inverse
+from ..symbolic.linalg import cholesky, cholesky_solve, spd_inverse, symmetric_product
 from .problem import ControlProblem, Level
 from .qp import Affine
 
@@ -87,7 +87,7 @@ def recursive_hierarchy(
         J = level.jacobian
         Jr = ca.mtimes(J, N)
         Minv_JrT = ca.mtimes(Minv, Jr.T)
-        Jbar = ca.mtimes(Minv_JrT, damped_inverse(ca.mtimes(Jr, Minv_JrT)))
+        Jbar = ca.mtimes(Minv_JrT, damped_inverse(symmetric_product(Jr.T, Minv_JrT)))
         if level.activation is not None:
             Jbar = ca.mtimes(Jbar, ca.diag(level.activation))
         offset = offset + ca.mtimes(Jbar, v.offset - level.bias - ca.mtimes(J, offset))
@@ -96,10 +96,11 @@ def recursive_hierarchy(
     return Affine(offset, matrix), N
 
 
-def least_squares_objective(level: Level, acceleration: Affine, mass: ca.SX) -> tuple[ca.SX, ca.SX]:
+def least_squares_objective(level: Level, acceleration: Affine, mass_acceleration: ca.SX) -> tuple[ca.SX, ca.SX]:
     """Hessian and gradient in x of  ½‖J a(x) + J̇q̇ − ẍ_d‖² + ½ε‖a(x) − a(0)‖²_M  (a(x) affine),
     each row's square weighted by its run-time activation if it has one (and the energy weighted
-    up as the most active row fades out).
+    up as the most active row fades out). `mass_acceleration`: M times a(x)'s matrix (the caller's,
+    which the torque rows share).
 
     Over the freedom a(x) leaves, the minimizer is the closed-form step with a pseudo-inverse,
     a + J̄⁺(ẍ_d − J̇q̇ − J a), also where J restricted to that freedom has lost rank: the task is
@@ -119,16 +120,17 @@ def least_squares_objective(level: Level, acceleration: Affine, mass: ca.SX) -> 
         for j in range(1, level.dim):
             strongest = ca.fmax(strongest, level.activation[j])
         energy_weight = energy_weight + (1.0 - strongest) * RELEASED_ENERGY_WEIGHT
-    energy = ca.mtimes([acceleration.matrix.T, mass, acceleration.matrix])
-    return ca.mtimes(G.T, G) + energy_weight * energy, ca.mtimes(G.T, residual)
+    energy = symmetric_product(acceleration.matrix, mass_acceleration)
+    return symmetric_product(G, G) + energy_weight * energy, ca.mtimes(G.T, residual)
 
 
 def least_squares_step(level: Level, acceleration: ca.SX, N: ca.SX, mass: ca.SX) -> ca.SX:
     """The acceleration after a level solved in least squares within range(N)."""
-    hessian, gradient = least_squares_objective(level, Affine(acceleration, N), mass)
+    hessian, gradient = least_squares_objective(level, Affine(acceleration, N), ca.mtimes(mass, N))
     # z and N z are redundant along null(N); γ‖(I − N)z‖² fixes those components without biasing N z.
     complement = ca.SX.eye(N.shape[0]) - N
-    z = cholesky_solve(cholesky(hessian + NULL_SPACE_REGULARIZATION * ca.mtimes(complement.T, complement)), -gradient)
+    z = cholesky_solve(cholesky(hessian + NULL_SPACE_REGULARIZATION * symmetric_product(complement, complement)),
+                       -gradient)
     return acceleration + ca.mtimes(N, z)
 
 

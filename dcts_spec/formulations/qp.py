@@ -118,12 +118,16 @@ def with_limits(
     ubx: list[float],
     variables: list[str],
     priorities: list[PriorityVariables] = (),
+    mass_acceleration: ca.SX | None = None,
 ) -> tuple[QP, Affine]:
     """The QP: torque limits (hard), joint/Cartesian bounds, the priority levels, then ½xᵀHx + fᵀx.
 
-    Returns the QP and the torque as an affine map of x.
+    Returns the QP and the torque as an affine map of x. `mass_acceleration`: M times the
+    acceleration's matrix, if the caller has it already (the same product, not a second one).
     """
-    torque = Affine(problem.torque(acceleration.offset), ca.mtimes(problem.mass_matrix, acceleration.matrix))
+    if mass_acceleration is None:
+        mass_acceleration = ca.mtimes(problem.mass_matrix, acceleration.matrix)
+    torque = Affine(problem.torque(acceleration.offset), mass_acceleration)
     rows = problem.acceleration_rows
     R_c = ca.mtimes(rows.matrix, acceleration.offset) + rows.offset
     tau_max = problem.torque_limit

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import casadi as ca
 
+from ..symbolic.linalg import symmetric_product
 from .problem import ControlProblem
 from .qp import ControlLaw
 from .weighted import weighted_qp
@@ -18,4 +19,4 @@ def qp_mt(problem: ControlProblem) -> ControlLaw:
     c = problem.coriolis - problem.external_torque
     if problem.spec.controller.minimized_torque == "full":
         c = c + problem.gravity
-    return weighted_qp(problem, 2.0 * ca.mtimes(M.T, M), 2.0 * ca.mtimes(M.T, c))
+    return weighted_qp(problem, 2.0 * symmetric_product(M, M), 2.0 * ca.mtimes(M.T, c))

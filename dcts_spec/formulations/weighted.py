@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import casadi as ca
 
+from ..symbolic.linalg import symmetric_product
 from .problem import ControlProblem
 from .qp import INF, Affine, ControlLaw, with_limits
 
@@ -30,7 +31,7 @@ def weighted_qp(problem: ControlProblem, regularization_hessian: ca.SX, regulari
         J = level.jacobian
         # a task's run-time activation scales its weight (0: it is left out)
         Jw = J if level.activation is None else ca.mtimes(ca.diag(level.activation), J)
-        H += 2.0 * w * ca.mtimes(Jw.T, J)
+        H += 2.0 * w * symmetric_product(Jw, J)
         f += -2.0 * w * ca.mtimes(Jw.T, level.target - level.bias)
     w_r = problem.spec.controller.regularization_weight * problem.levels[-1].weight / top
     H += w_r * regularization_hessian + ACCELERATION_REGULARIZATION * ca.SX.eye(n)
