@@ -35,6 +35,13 @@ FEASIBILITY_TOLS = (1e-10, 1e-9, 1e-8)  # HiGHS primal/dual feasibility toleranc
 CERTIFY_TOL = 1e-8  # a stage's a may break a hard row by at most this, relative to max(1, |bound|)
 DELTA_PIN_TOL = 1e-9  # |δ − δ*| allowed when maximizing s on a bent level, relative to max(1, |ẍ_d|)
 QP_TIME_LIMIT = 2.0  # s, per HiGHS solve
+POLISH_ITERATIONS = 20000  # the active-set method from HiGHS's answer (exact_qp)
+# A row that the freedom left by the levels does not touch, except by the round-off of its null
+# basis, must not constrain the next step: a UR5 state's posture stopped 3.7e-5 rad/s² short of its
+# optimum to keep a joint row, at its bound, from being crossed by 1.9e-10 rad/s², the null
+# direction touching that row by 5e-13. (Widening every row by 1e-10 instead let a Panda state's
+# posture gain 4e-3 rad/s² by crossing two active rows by 3e-10: too ill-conditioned for that.)
+NULL_ROUNDOFF = 1e-11
 NULL_TOL = 1e-9  # singular values below this (relative to max(1, σ_max)) span the null space
 
 
@@ -222,11 +229,18 @@ def active_set_qp(H, f, C, lower, upper, x0, max_iter: int = 1000) -> np.ndarray
 
 
 def exact_qp(H, f, C, lower, upper, x0) -> np.ndarray:
-    """min ½xᵀHx + fᵀx s.t. lower ≤ C x ≤ upper by two solvers, keeping the better answer that
-    holds the rows (to CERTIFY_TOL): the active-set method above and HiGHS's QP solver. Each was
-    seen to fail where the other did not: HiGHS reporting "Optimal" outside the rows, and the
-    active-set method stopping at a bend 1.6 × the least one on a degenerate face (iiwa14, two
-    levels, a bent level above)."""
+    """min ½xᵀHx + fᵀx s.t. lower ≤ C x ≤ upper by two solvers, keeping the best answer that holds
+    the rows (to CERTIFY_TOL): the active-set method above from x0, HiGHS's QP solver, and the
+    active-set method from HiGHS's answer. Each was seen to fail where the others did not: HiGHS
+    reporting "Optimal" outside the rows, or 2 × the least bend inside them (panda, two levels;
+    the active-set method from there reached the least one in ~5,000 steps), or 3.7e-5 off in a
+    direction the objective barely sees (UR5, three levels); the active-set method stopping at a
+    bend 1.6 × the least one on a degenerate face (iiwa14, two levels, a bent level above)."""
+    scale = np.maximum(1.0, np.minimum(np.abs(lower), np.abs(upper)))
+
+    def holds(x) -> bool:
+        return bool(np.all(np.maximum(lower - C @ x, C @ x - upper) <= CERTIFY_TOL * scale))
+
     candidates = []
     try:
         candidates.append(active_set_qp(H, f, C, lower, upper, x0))
@@ -236,8 +250,12 @@ def exact_qp(H, f, C, lower, upper, x0) -> np.ndarray:
     x, _ = solve_highs(f, C, lower, upper, -free, free, Q=H)
     if x is not None:
         candidates.append(x)
-    scale = np.maximum(1.0, np.minimum(np.abs(lower), np.abs(upper)))
-    held = [x for x in candidates if np.all(np.maximum(lower - C @ x, C @ x - upper) <= CERTIFY_TOL * scale)]
+        if holds(x):
+            try:
+                candidates.append(active_set_qp(H, f, C, lower, upper, x, max_iter=POLISH_ITERATIONS))
+            except ReferenceError:
+                pass
+    held = [x for x in candidates if holds(x)]
     if not held:
         raise ReferenceError("QP: neither solver found a point that holds the rows")
     return min(held, key=lambda x: 0.5 * x @ H @ x + f @ x)
@@ -390,10 +408,13 @@ def lexicographic_solution(robot, tasks: list[NumericTask], q, dq, tau_ext, dt: 
 
 
 def _z_rows(hard: HardRows, a: np.ndarray, N: np.ndarray):
-    """Hard rows in the step z (a + N z): G N z ∈ [lo − G a, hi − G a]."""
+    """Hard rows in the step z (a + N z): G N z ∈ [lo − G a, hi − G a]; entries of G N at the null
+    basis's round-off (below NULL_ROUNDOFF of their row of G) are 0."""
     Ga = hard.G @ a
+    GN = hard.G @ N
+    GN[np.abs(GN) < NULL_ROUNDOFF * np.linalg.norm(hard.G, axis=1)[:, None]] = 0.0
     # z = 0 stays feasible despite the previous stage's round-off (certified ≤ CERTIFY_TOL)
-    return hard.G @ N, np.minimum(hard.lo - Ga, 0.0), np.maximum(hard.hi - Ga, 0.0)
+    return GN, np.minimum(hard.lo - Ga, 0.0), np.maximum(hard.hi - Ga, 0.0)
 
 
 def _exact_level(hard: HardRows, a: np.ndarray, N: np.ndarray, lv: Level):
