@@ -427,8 +427,8 @@ class Cascade:
                 free_lo, free_hi = lbx.copy(), ubx.copy()
                 lbx[bend] = ubx[bend] = 0.0
                 # with every level above nominal, `_first_to_scale` (or for the lowest level, the
-                # first QP) found this stage infeasible
-                if i > 0 and self._nominal_through(i, lbx, ubx):
+                # first QP, also when it is the only level) found this stage infeasible
+                if (i > 0 or lowest) and self._nominal_through(i, lbx, ubx):
                     x = None
                 else:
                     x = self.finish_lowest(lbx, ubx) if lowest else self.scale(i, lbx, ubx)
