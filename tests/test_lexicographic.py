@@ -31,7 +31,8 @@ from dcts_spec.robot.builtin import example_robot_data_dir
 from dcts_spec.spec import load_spec_text
 from dcts_spec.validate import validate_spec
 from formulation_cases import CAMPAIGN, HOME, TOOL, State, check_bounds, numeric_tasks, spec_text
-from lexicographic_reference import LexicographicSolution, lexicographic_solution, solve_highs, task_levels
+from lexicographic_reference import (LexicographicSolution, active_set_qp, lexicographic_solution, solve_highs,
+                                    task_levels)
 from reference import closed_form_hierarchy, dynamics
 
 DT = 0.001  # controller.period (default)
@@ -505,6 +506,44 @@ def test_a_bend_stage_goes_on_where_daqp_fails_at_a_smaller_step():
     best, status = solve_highs(scale, *rows, lo, hi, sense_max=True)
     assert best is not None, status
     assert abs(x[s] - best[s]) <= 1e-5 * abs(best[s]), (x[s] / ubx[s], best[s] / ubx[s])
+
+
+@pytest.mark.parametrize("name", ["thin_set_after_bend_rows", "thin_set_after_bend_scaling"])
+def test_a_bent_level_witnesses_the_stages_below_it(name):
+    """QP data of two golden states of TALOS's 28 joints (scripts/bench_sizes.py's talos28 row): a
+    joint bound relaxed, then the top level bent. The bend's answer crossed the torque rows (in
+    one state also its own largest scaling) by ~1e-9, inside the check's tolerance, and DAQP then
+    called every later stage infeasible: the bend's last iterate was the answer, 0.4–0.9 % above
+    the posture's least cost with that bend and scaling, and 1.7 % of x away from it, which moved
+    with the last bits of the data (C and Python parted by 30 Nm). With the rows and bounds the
+    bend crosses widened to it (`Cascade._admit`), the final QP runs: an exact active-set method
+    started at the answer, with its bend and scaling fixed, finds nothing better, and data changed
+    by 1e-14 move the answer by < 1e-6 of x."""
+    from dcts_spec.solve.lexicographic import Cascade
+
+    args, structure = _saved_qp(name)
+    H, f, A, lbx, ubx, lba, uba = args
+    (s, bend), = structure.priorities
+    x = solve_lexicographic(*args, structure)
+    cascade = Cascade(*args, structure)
+    assert cascade.levels() is None and cascade.relax()
+    fixed = [s, *bend]
+    lo, hi = lbx.copy(), ubx.copy()
+    lo[fixed] = hi[fixed] = x[fixed]
+    value = A @ x  # (x holds the rows to the check's tolerance: the start the method needs, exactly)
+    rows = np.vstack([np.eye(x.size), A])
+    lower = np.concatenate([np.minimum(lo, x), np.minimum(cascade.lba, value)])
+    upper = np.concatenate([np.maximum(hi, x), np.maximum(cascade.uba, value)])
+    polished = active_set_qp(H, f, rows, lower, upper, x)
+    cost = lambda y: 0.5 * y @ H @ y + f @ y  # noqa: E731
+    assert cost(x) - cost(polished) <= 1e-9 * abs(cost(polished))
+    assert _rel(x, polished) < 1e-9
+    rng = np.random.default_rng(1)
+    for _ in range(3):
+        def nudged(a):
+            return a * (1.0 + 1e-14 * rng.standard_normal(a.shape))
+        moved = solve_lexicographic(H, nudged(f), nudged(A), lbx, ubx, nudged(lba), nudged(uba), structure)
+        assert _rel(moved, x) < 1e-6
 
 
 # -- the lowest level's scaling and the final QP in one (Cascade.finish_lowest) ---------------------
