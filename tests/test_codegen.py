@@ -732,3 +732,39 @@ def test_bench_runs(tmp_path):
     assert result["c_step"]["trajectory"]["step"]["median_us"] > 0
     assert "Pinocchio" in text and "qp_data" in text
 
+
+
+def test_casadi_helpers_become_macros_with_the_virtual_machines_numbers(tmp_path):
+    """patch_casadi_source turns CasADi's sq and fabs calls into macros: the compiled function gives
+    what CasADi's virtual machine (the Python runtime) gives, NaN, ±inf and ±0 included."""
+    import casadi as ca
+
+    from dcts_spec.codegen.bundle import patch_casadi_source
+
+    x, y = ca.SX.sym("x"), ca.SX.sym("y")
+    out = ca.vertcat(ca.fmin(x, y), ca.fmax(x, y), x**2, ca.fabs(x), ca.fmax(ca.fmin(x, 2 * y), y**2))
+    function = ca.Function("helpers", [x, y], [out])
+    generator = ca.CodeGenerator("helpers.c")
+    generator.add(function)
+    generator.generate(str(tmp_path) + "/")
+    source = patch_casadi_source((tmp_path / "helpers.c").read_text())
+    assert "casadi_sq(a" not in source and "DCTS_SQ(" in source and "DCTS_FABS(" in source
+    (tmp_path / "helpers.c").write_text(source)
+    values = [np.nan, np.inf, -np.inf, 0.0, -0.0, 1.5, -2.0]
+    pairs = [(a, b) for a in values for b in values]
+    (tmp_path / "main.c").write_text(
+        "#include <stdio.h>\n"
+        "int helpers(const double** arg, double** res, long long int* iw, double* w, int mem);\n"
+        "int main(void) {\n  double x, y, r[5];\n  const double *arg[2] = {&x, &y};\n  double *res[1] = {r};\n"
+        "  while (scanf(\"%lf %lf\", &x, &y) == 2) {\n    helpers(arg, res, 0, 0, 0);\n"
+        "    printf(\"%a %a %a %a %a\\n\", r[0], r[1], r[2], r[3], r[4]);\n  }\n  return 0;\n}\n")
+    exe = tmp_path / "helpers"
+    subprocess.run(["cc", "-O2", "-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-o", str(exe),
+                    str(tmp_path / "helpers.c"), str(tmp_path / "main.c"), "-lm"], check=True)
+    text = "\n".join(" ".join(str(v) for v in pair) for pair in pairs)
+    done = subprocess.run([str(exe)], input=text, capture_output=True, text=True, check=True)
+    rows = [[float.fromhex(v) for v in line.split()] for line in done.stdout.splitlines()]
+    assert len(rows) == len(pairs)
+    for (a, b), row in zip(pairs, rows, strict=True):
+        expected = np.array(function(a, b)).ravel()
+        np.testing.assert_array_equal(row, expected, err_msg=f"x={a}, y={b}")
