@@ -90,9 +90,8 @@ def model_spec(model: Model) -> str:
     reference: {{q: {_list(q0)}}}""")
     locked_text = ", ".join(f"{n}: {v:.6g}" for n, v in locked.items())
     # Twice the URDF's torques, as the table was first measured: at the URDF's (TALOS's wrist:
-    # 3 Nm) a quarter of the golden vectors are relaxed. 16 joints pass their golden test at
-    # either since 5467cf5; 28 joints at neither (open): in a few relaxed states the top level's
-    # bend stage does not converge in its 30 steps, and C and Python return different iterates.
+    # 3 Nm) a quarter of the golden vectors are relaxed. 16 and 28 joints pass their golden test
+    # at either (28 since a bent level's answer is admitted as the stages' witness, 0262fb8).
     torque = _list(TORQUE_MARGIN * reduced.effortLimit)
     return f"""version: 1
 name: sizes_{model.key}
