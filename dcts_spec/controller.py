@@ -24,7 +24,7 @@ from .formulations.parameters import ParameterLayout
 from .formulations.qp import BOUNDS
 from .parameter_ramp import ParameterRamp, ramp_steps
 from .robot.model import Robot
-from .solve import Structure, check_bounds, solve_lexicographic, unbounded_solution
+from .solve import Structure, check_bounds, rounding_spread, solve_lexicographic, unbounded_solution
 from .spec import Spec, load_spec
 from .tasks import ReferenceInput
 from .validate import ValidationReport, validate_spec
@@ -235,10 +235,29 @@ class Controller:
 
     # -- running ---------------------------------------------------------------------------------
 
+    @staticmethod
+    def _qp(data: dict[str, np.ndarray]) -> tuple[np.ndarray, ...]:
+        """H, f, A, lbx, ubx, lba, uba: the arguments of the lexicographic solve, as vectors."""
+        return (data["H"], data["f"].ravel(), data["A"], data["lbx"].ravel(), data["ubx"].ravel(),
+                data["lba"].ravel(), data["uba"].ravel())
+
     def _solve(self, data: dict[str, np.ndarray]) -> np.ndarray | None:
         """The lexicographic solution at the data (None if DAQP failed)."""
-        return solve_lexicographic(data["H"], data["f"].ravel(), data["A"], data["lbx"].ravel(), data["ubx"].ravel(),
-                                   data["lba"].ravel(), data["uba"].ravel(), self._structure)
+        return solve_lexicographic(*self._qp(data), self._structure)
+
+    def answer_spread(self, q, dq, tau_ext, ref, x: np.ndarray, samples: int, enough: float) -> float:
+        """How far the last step's answer x (its QP solution, at this state) is determined by its QP
+        data: the largest relative change of τ, q̈ and x when the data change at the level of their
+        rounding (`solve/sensitivity.py`; `samples` solves, stopping above `enough`). 0 without a QP."""
+        if not self.nx:
+            return 0.0
+        data = self.evaluate_data(q, dq, tau_ext, ref)
+
+        def outputs(answer: np.ndarray) -> np.ndarray:
+            return np.concatenate([data["tau0"].ravel() + data["T"] @ answer, data["ddq0"].ravel() + data["Q"] @ answer,
+                                   answer])
+
+        return rounding_spread(*self._qp(data), self._structure, x, outputs, samples, enough)
 
     def _binding(self, data: dict[str, np.ndarray], x: np.ndarray) -> bool:
         """Does a torque limit or a joint/Cartesian bound bind at x?"""

@@ -31,6 +31,7 @@ from dcts_spec.robot.builtin import example_robot_data_dir
 from dcts_spec.spec import load_spec_text
 from dcts_spec.validate import validate_spec
 from formulation_cases import CAMPAIGN, HOME, TOOL, State, check_bounds, numeric_tasks, spec_text
+from saved_qp import saved_qp
 from lexicographic_reference import (LexicographicSolution, active_set_qp, lexicographic_solution, solve_highs,
                                     task_levels)
 from reference import closed_form_hierarchy, dynamics
@@ -446,14 +447,6 @@ def test_regression_panda_cartesian_floor():
     assert scaled_states >= 5, f"the premise: the bound scales the position task in some states ({scaled_states})"
 
 
-def _saved_qp(name: str) -> tuple[list[np.ndarray], Structure]:
-    """QP data saved by a test's author (tests/data/NAME.npz): the cascade's arguments and structure."""
-    data = np.load(Path(__file__).parent / "data" / f"{name}.npz")
-    bends = [tuple(data[f"bend{k}"].tolist()) for k in range(len(data["scaling"]))]
-    structure = Structure(range(*data["bound_rows"]), tuple(zip(data["scaling"].tolist(), bends)))
-    return [data[k] if k in ("H", "A") else data[k].ravel() for k in ("H", "f", "A", "lbx", "ubx", "lba", "uba")], structure
-
-
 def _converged(monkeypatch, args, structure) -> np.ndarray:
     """The cascade with its proximal iterations run to a tolerance of 1e-12."""
     from dcts_spec.solve import lexicographic
@@ -470,7 +463,7 @@ def test_a_stage_stops_when_only_noise_moves(monkeypatch):
     the one of proximal iterations run to a tolerance of 1e-12."""
     from dcts_spec.solve import lexicographic
 
-    args, structure = _saved_qp("stalled_scale_stage")
+    args, structure = saved_qp("stalled_scale_stage")
     solves = []
     original = lexicographic.daqp_qp
     monkeypatch.setattr(lexicographic, "daqp_qp", lambda *a: solves.append(1) or original(*a))
@@ -488,7 +481,7 @@ def test_a_bend_stage_goes_on_where_daqp_fails_at_a_smaller_step():
     largest scaling with it (an LP), on the relaxed bounds."""
     from dcts_spec.solve.lexicographic import Cascade
 
-    args, structure = _saved_qp("bend_after_relaxation")
+    args, structure = saved_qp("bend_after_relaxation")
     (s, bend), = structure.priorities
     x = solve_lexicographic(*args, structure)
     cascade = Cascade(*args, structure)
@@ -521,7 +514,7 @@ def test_a_bent_level_witnesses_the_stages_below_it(name):
     by 1e-14 move the answer by < 1e-6 of x."""
     from dcts_spec.solve.lexicographic import Cascade
 
-    args, structure = _saved_qp(name)
+    args, structure = saved_qp(name)
     H, f, A, lbx, ubx, lba, uba = args
     (s, bend), = structure.priorities
     x = solve_lexicographic(*args, structure)

@@ -21,7 +21,8 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from ..controller import ACTIVE_TOLERANCE, DATA_OUTPUTS, STATE_TOLERANCE, TORQUE_TOLERANCE, Controller
+from ..controller import (ACTIVE_TOLERANCE, DATA_OUTPUTS, STATE_TOLERANCE, STATUS_LIMITS_RELAXED, TORQUE_TOLERANCE,
+                          Controller)
 from ..formulations.qp import BOUNDS, HARD
 from ..parameter_ramp import ramp_steps
 from ..solve import BOUND_TOLERANCE, DAQP_SETTINGS
@@ -206,6 +207,23 @@ def generate_casadi(controller: Controller, name: str, directory: Path) -> dict[
 # -- golden vectors --------------------------------------------------------------------------------
 
 
+# How closely the C must replay the Python runtime, (tolerance, on vectors solved with the limits
+# relaxed), relative (templates/test.c.in says why)
+GOLDEN_TOLERANCES = {"qp_mt": (1e-5, 1e-4), "qp_md": (1e-5, 1e-4), "dcts": (1e-6, 1e-3)}
+CLOSED_FORM_TOLERANCE = (1e-8, 1e-8)
+# Whether a vector's answer is determined by its data (solve/sensitivity.py): this many solves on
+# rounding-size changes of the QP data, and it is if none moves τ, q̈ or x by more than this
+# fraction of the vector's tolerance. (The spread a few samples find is a lower bound: G1's 29
+# joints, 126 vectors, flagged 11 with 4 samples, 17 with 12.)
+SPREAD_SAMPLES = 12
+SPREAD_FRACTION = 0.1
+
+
+def golden_tolerances(formulation: str) -> tuple[float, float]:
+    """(tolerance, tolerance on the vectors solved with the limits relaxed) of a formulation."""
+    return GOLDEN_TOLERANCES.get(formulation, CLOSED_FORM_TOLERANCE)
+
+
 @dataclass
 class Golden:
     states: list[State]
@@ -215,27 +233,39 @@ class Golden:
     x: np.ndarray  # padded to nx
     nx: np.ndarray  # valid entries of x per vector
     status: np.ndarray
+    # per vector: how far rounding-size changes of the QP data moved the Python runtime's answer
+    # (Controller.answer_spread), and whether that is within SPREAD_FRACTION of its tolerance:
+    # the test compares the others on status and torque limits only
+    spread: np.ndarray
+    determined: np.ndarray
 
 
 def compute_golden(controller: Controller, states: list[State]) -> Golden:
-    """Run the Python runtime over the states in order (a fresh controller state first)."""
+    """Run the Python runtime over the states in order (a fresh controller state first), and
+    measure how far each answer is determined by its data."""
     controller._last_q = None
     controller.reset_params()
     n, nx, levels = controller.n, controller.nx, len(controller.priorities)
     count = len(states)
     tau, ddq = np.zeros((count, n)), np.zeros((count, n))
     scaling, x = np.zeros((count, levels)), np.zeros((count, max(nx, 1)))
-    nxs, status = np.zeros(count, dtype=int), np.zeros(count, dtype=int)
+    nxs, status, spread = np.zeros(count, dtype=int), np.zeros(count, dtype=int), np.zeros(count)
+    tolerances = golden_tolerances(controller.formulation)
     for k, s in enumerate(states):
         if s.params is not None:
             controller.set_params(s.params)
-        r = controller.step(s.q, s.dq, s.tau_ext, s.ref if controller.ref_size else None)
+        ref = s.ref if controller.ref_size else None
+        r = controller.step(s.q, s.dq, s.tau_ext, ref)
         tau[k], ddq[k], scaling[k], status[k] = r.tau, r.ddq, r.scaling, r.status
         nxs[k] = r.x.size
         x[k, : r.x.size] = r.x
+        if r.status >= 0:
+            enough = SPREAD_FRACTION * tolerances[r.status == STATUS_LIMITS_RELAXED]
+            spread[k] = controller.answer_spread(s.q, s.dq, s.tau_ext, ref, r.x, SPREAD_SAMPLES, enough)
     controller._last_q = None
     controller.reset_params()
-    return Golden(states, tau, ddq, scaling, x, nxs, status)
+    determined = spread <= SPREAD_FRACTION * np.where(status == STATUS_LIMITS_RELAXED, tolerances[1], tolerances[0])
+    return Golden(states, tau, ddq, scaling, x, nxs, status, spread, determined)
 
 
 def golden_sources(name: str, golden: Golden, nref_alloc: int, nparam_alloc: int) -> tuple[str, str]:
@@ -268,6 +298,7 @@ extern const double {name}_golden_scaling[{count}][{big}_NLEVELS_ALLOC];
 extern const double {name}_golden_x[{count}][{big}_NX_ALLOC];
 extern const int {name}_golden_nx[{count}];
 extern const int {name}_golden_status[{count}];
+extern const int {name}_golden_determined[{count}]; /* 0: status and torque limits compared only */
 
 #endif
 """
@@ -306,6 +337,7 @@ const double {name}_golden_x[{count}][{big}_NX_ALLOC] = {{
 }};
 const int {name}_golden_nx[{count}] = {{{", ".join(str(int(v)) for v in golden.nx)}}};
 const int {name}_golden_status[{count}] = {{{", ".join(str(int(v)) for v in golden.status)}}};
+const int {name}_golden_determined[{count}] = {{{", ".join(str(int(v)) for v in golden.determined)}}};
 """
     return header, source
 
@@ -317,7 +349,10 @@ def golden_json(golden: Golden) -> dict:
         return [float(e) if np.isfinite(e) else repr(float(e)) for e in v]
 
     return {
-        "note": "inputs and the Python runtime's outputs, in the order they were run",
+        "note": ("inputs and the Python runtime's outputs, in the order they were run; rounding_spread: how far "
+                 "rounding-size changes of the QP data moved the answer (relative), determined: whether that "
+                 "is within a tenth of the test's tolerance (if not, the test compares status and torque "
+                 "limits only)"),
         "vectors": [
             {
                 "kind": s.kind,
@@ -325,6 +360,8 @@ def golden_json(golden: Golden) -> dict:
                 **({"params": vec(s.params)} if s.params is not None else {}),
                 "tau": vec(golden.tau[k]), "ddq": vec(golden.ddq[k]), "scaling": vec(golden.scaling[k]),
                 "x": vec(golden.x[k, : golden.nx[k]]), "status": int(golden.status[k]),
+                "rounding_spread": float(golden.spread[k]) if np.isfinite(golden.spread[k]) else "inf",
+                "determined": bool(golden.determined[k]),
             }
             for k, s in enumerate(golden.states)
         ],
@@ -344,12 +381,9 @@ class BundleSources:
 
 
 def _golden_tolerances(formulation: str) -> dict[str, str]:
-    """How closely the C must replay the Python runtime (templates/test.c.in says why)."""
-    if formulation in ("qp_mt", "qp_md"):
-        return {"GOLDEN_TOLERANCE": "1e-5", "GOLDEN_RELAXED_TOLERANCE": "1e-4"}
-    if formulation == "dcts":
-        return {"GOLDEN_TOLERANCE": "1e-6", "GOLDEN_RELAXED_TOLERANCE": "1e-3"}
-    return {"GOLDEN_TOLERANCE": "1e-8", "GOLDEN_RELAXED_TOLERANCE": "1e-8"}
+    """The template values of golden_tolerances."""
+    tolerance, relaxed = golden_tolerances(formulation)
+    return {"GOLDEN_TOLERANCE": f"{tolerance:g}", "GOLDEN_RELAXED_TOLERANCE": f"{relaxed:g}"}
 
 
 def _parameter_values(controller: Controller, name: str, big: str) -> dict[str, object]:
@@ -582,7 +616,9 @@ def generate_sources(
         "bound_tolerance": BOUND_TOLERANCE,
         "qp_data_instructions": work["instructions"],
         "casadi_work": {k: work[k] for k in ("sz_arg", "sz_res", "sz_iw", "sz_w")},
-        "golden": {"count": len(states), "statuses": statuses},
+        "golden": {"count": len(states), "statuses": statuses,
+                   # vectors whose answer rounding-size changes of the data move beyond the tolerance
+                   "undetermined": [int(k) for k in np.flatnonzero(~golden.determined)]},
         "daqp": {"version": DAQP_VERSION, "sources": "daqp/"} if nx else None,
         "library": f"lib{name}.so",
         "files": sorted([*files, f"{name}_casadi.c", f"{name}_casadi.h", "golden.json", "manifest.json"]

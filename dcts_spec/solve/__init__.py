@@ -9,6 +9,7 @@ from .lexicographic import (
     solve_lexicographic,
     unbounded_solution,
 )
+from .sensitivity import rounding_spread
 
-__all__ = ["BOUND_TOLERANCE", "DAQP_SETTINGS", "BoundCheck", "Structure", "check_bounds", "solve_lexicographic",
-           "unbounded_solution"]
+__all__ = ["BOUND_TOLERANCE", "DAQP_SETTINGS", "BoundCheck", "Structure", "check_bounds", "rounding_spread",
+           "solve_lexicographic", "unbounded_solution"]

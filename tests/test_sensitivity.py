@@ -1,0 +1,43 @@
+"""Is a lexicographic answer determined by its QP data (solve/sensitivity.py)?"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from dcts_spec.solve import solve_lexicographic
+from dcts_spec.solve import sensitivity
+from dcts_spec.solve.sensitivity import rounding_spread
+from saved_qp import saved_qp
+
+
+def _identity(x: np.ndarray) -> np.ndarray:
+    return x
+
+
+def test_an_answer_its_data_do_not_determine_is_told_from_one_they_do():
+    """QP data of a golden state of G1's 29 joints (2× the URDF's torques): joint bounds relaxed,
+    then the only level bent, on the thin feasible set the relaxation leaves. DAQP solves the bend
+    or calls it infeasible depending on the last bits of the data, and changes of 1e-14 relative
+    move the answer by more than its own size; C and Python parted by 9 % of the torques there.
+    A state where a stage ran long (stalled_scale_stage) moves by ~1e-10 at most."""
+    args, structure = saved_qp("undetermined_after_relaxation")
+    x = solve_lexicographic(*args, structure)
+    assert rounding_spread(*args, structure, x, _identity, samples=12, enough=np.inf) > 0.1
+
+    args, structure = saved_qp("stalled_scale_stage")
+    x = solve_lexicographic(*args, structure)
+    assert rounding_spread(*args, structure, x, _identity, samples=12, enough=np.inf) < 1e-8
+
+
+def test_the_spread_stops_at_enough_and_needs_changed_data(monkeypatch):
+    """It stops sampling once a change exceeds `enough`; and it is the data's changes that move the
+    answer: with ROUNDING 0 the same data give the same answer (the solve is deterministic)."""
+    args, structure = saved_qp("undetermined_after_relaxation")
+    x = solve_lexicographic(*args, structure)
+    solves = []
+    original = sensitivity.solve_lexicographic
+    monkeypatch.setattr(sensitivity, "solve_lexicographic", lambda *a: solves.append(1) or original(*a))
+    assert rounding_spread(*args, structure, x, _identity, samples=12, enough=1e-3) > 1e-3
+    assert len(solves) < 12
+    monkeypatch.setattr(sensitivity, "ROUNDING", 0.0)
+    assert rounding_spread(*args, structure, x, _identity, samples=3, enough=np.inf) == 0.0
