@@ -235,6 +235,13 @@ def object_sizes(bundle: Path, manifest: dict, work: Path) -> dict:
     return sizes
 
 
+def build_flags(manifest: dict) -> str:
+    """The optimization flags the bundle's Makefile builds with: its own, and its QP data's."""
+    qp_data = tuple(manifest.get("qp_data_optimization", HOST_OPTIMIZATION))
+    own = flags_text(HOST_OPTIMIZATION)
+    return own if qp_data == HOST_OPTIMIZATION else f"{own}, QP data {flags_text(qp_data)}"
+
+
 def c_source_bytes(bundle: Path, manifest: dict) -> int:
     """Bytes of the controller's C sources (the step and the CasADi-generated QP data)."""
     return sum((bundle / f"{manifest['name']}{suffix}.c").stat().st_size for suffix in ("", "_casadi"))
@@ -263,7 +270,7 @@ def bench(spec_file: str | Path, formulation: str | None = None, states: int = 1
         independent = StateSampler(controller, seed + 1).mixed(states, limit_fraction=0.15)
         generation_s = time.perf_counter() - t0
 
-        phase(f"timing the C step (the bundle's build, {flags_text(HOST_OPTIMIZATION)}) on the closed-loop, then "
+        phase(f"timing the C step (the bundle's build, {build_flags(manifest)}) on the closed-loop, then "
               f"the independent states, best of {REPEATS} runs each")
         exe = build_c_harness(bundle, manifest, work)
         c_traj = run_c_harness(exe, along, work, "trajectory")
@@ -292,7 +299,7 @@ def bench(spec_file: str | Path, formulation: str | None = None, states: int = 1
         "formulation": manifest["formulation"],
         "sizes": {"nq": manifest["nq"], "nref": manifest["nref"], "nx": manifest["nx"], "na": manifest["na"],
                   "nlevels": manifest["nlevels"]},
-        "compiler": f"{host['compiler']} {flags_text(HOST_OPTIMIZATION)} (the bundle's Makefile)",
+        "compiler": f"{host['compiler']} {build_flags(manifest)} (the bundle's Makefile)",
         "build": built.cost.to_dict() if built.cost else None,
         "c_source_bytes": source_bytes,
         "cortex_m7": firmware,
