@@ -184,7 +184,8 @@ def main(argv: list[str] | None = None) -> int:
             rows.append(row(label, bench(spec, args.states, args.build_timeout)))
             print(markdown(rows[-1:]).splitlines()[-1], file=sys.stderr, flush=True)
     table = markdown(rows)
-    stamp = f"Measured {datetime.date.today().isoformat()} on {os.cpu_count()} cores, {rows[0]['compiler']}."
+    compilers = "; ".join(dict.fromkeys(r["compiler"] for r in rows))  # (the QP data's flags follow their size)
+    stamp = f"Measured {datetime.date.today().isoformat()} on {os.cpu_count()} cores, {compilers}."
     if args.out:
         args.out.write_text(f"{table}\n\n{stamp}\n")
     else:
