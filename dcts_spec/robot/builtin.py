@@ -9,6 +9,8 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
+from .urdf import build_model
+
 BUILTIN_ROBOTS = ("iiwa14", "panda")
 
 PANDA_FINGER_JOINTS = ("panda_finger_joint1", "panda_finger_joint2")
@@ -61,7 +63,7 @@ def lock_joints(model: pin.Model, locked: dict[str, float]) -> pin.Model:
 
 def load_builtin_model(name: str) -> pin.Model:
     """Pinocchio model of a built-in robot, with its default joints locked."""
-    model = pin.buildModelFromUrdf(str(builtin_urdf_path(name)))
+    model, _ = build_model(builtin_urdf_path(name))
     return lock_joints(model, builtin_locked_joints(name))
 
 

@@ -19,6 +19,7 @@ from ..spec import load_spec
 from .builtin import BUILTIN_ROBOTS, builtin_locked_joints, builtin_urdf_path, load_builtin_model
 from .model import JointLimits
 from .resolve import _quiet_stderr, resolve_robot
+from .urdf import build_model
 
 FRAME_KINDS = {pin.FrameType.BODY: "link", pin.FrameType.JOINT: "joint", pin.FrameType.FIXED_JOINT: "fixed joint",
                pin.FrameType.OP_FRAME: "frame", pin.FrameType.SENSOR: "sensor"}
@@ -149,7 +150,7 @@ def describe(target: str) -> RobotDescription:
 def _load_urdf(path: Path) -> pin.Model:
     try:
         with _quiet_stderr():  # urdfdom prints its complaint itself; the message below says it
-            model = pin.buildModelFromUrdf(str(path))
+            model, _ = build_model(path)
     except Exception as error:  # Pinocchio raises plain RuntimeErrors for bad URDFs
         raise DescribeError(f"cannot load the URDF {path}: {error}") from None
     if model.nv == 0:
@@ -165,8 +166,9 @@ def _description(name: str, source: str, urdf: Path, model: pin.Model, limits: J
         kind = _joint_type(joint.shortname())
         unit = "m" if kind == "prismatic" else "rad"
         q, v = joint.idx_q, joint.idx_v
-        position = Limit(None, None, unit) if kind == "continuous" else Limit(
-            _finite(limits.q_min[q]), _finite(limits.q_max[q]), unit)
+        position = Limit(_finite(limits.q_min[q]), _finite(limits.q_max[q]), unit)
+        if kind == "revolute" and position.min is None and position.max is None:
+            kind = "continuous"  # (a URDF continuous joint, read as a revolute one: robot/urdf.py)
         joints.append(Joint(model.names[jid], kind, position, Limit(None, _finite(limits.v_max[v]), f"{unit}/s"),
                             Limit(None, _finite(limits.tau_max[v]), "N" if unit == "m" else "Nm")))
     frames = [Frame(f.name, FRAME_KINDS.get(f.type, str(f.type)), model.names[f.parentJoint])
@@ -175,11 +177,8 @@ def _description(name: str, source: str, urdf: Path, model: pin.Model, limits: J
 
 
 def _joint_type(shortname: str) -> str:
-    """Pinocchio's joint model name (JointModelRZ, JointModelRUBX, JointModelPrismaticUnaligned, …)."""
-    kind = shortname.removeprefix("JointModel")
-    if kind.startswith("RUB") or "Unbounded" in kind:
-        return "continuous"
-    return "prismatic" if kind.startswith("P") else "revolute"
+    """Pinocchio's joint model name (JointModelRZ, JointModelPrismaticUnaligned, …)."""
+    return "prismatic" if shortname.removeprefix("JointModel").startswith("P") else "revolute"
 
 
 def _finite(value: float) -> float | None:

@@ -90,4 +90,5 @@ class Robot:
     def neutral_configuration(self) -> np.ndarray:
         """Middle of the joint range where it is finite, zero otherwise."""
         lo, hi = self.limits.q_min, self.limits.q_max
-        return np.where(np.isfinite(lo) & np.isfinite(hi), 0.5 * (lo + hi), 0.0)
+        finite = np.isfinite(lo) & np.isfinite(hi)
+        return np.where(finite, 0.5 * (np.where(finite, lo, 0.0) + np.where(finite, hi, 0.0)), 0.0)

@@ -19,6 +19,7 @@ from ..spec.types import as_list, size_of
 from ..spec.units import to_si
 from .builtin import builtin_locked_joints, builtin_urdf_path, lock_joints
 from .model import CartesianBound, JointLimits, Robot
+from .urdf import build_model
 
 AXIS_INDEX = {"x": 0, "y": 1, "z": 2}
 LISTED_FRAMES = 8  # an unknown frame's message lists this many candidates, the closest first
@@ -79,7 +80,7 @@ def _load_model(spec: Spec, diags: list[Diagnostic]) -> tuple[pin.Model | None, 
             return None, path
     try:
         with _quiet_stderr():  # urdfdom prints its parser's complaint itself; the diagnostic says it
-            full = pin.buildModelFromUrdf(str(path))
+            full, _ = build_model(path)
     except Exception as exc:  # Pinocchio raises plain RuntimeErrors for bad URDFs
         diags.append(src.diagnostic(where, f"cannot load the URDF {path}: {exc}"))
         return None, path

@@ -27,7 +27,8 @@ class RobotSpec(StrictModel):
     """A built-in robot (`model`) or any URDF (`urdf`, relative to the spec file)."""
 
     model: Literal["iiwa14", "panda"] | None = Field(None, description="built-in robot", examples=["iiwa14", "panda"])
-    urdf: str | None = Field(None, description="path to a URDF file, relative to the spec file",
+    urdf: str | None = Field(None, description=("path to a URDF file, relative to the spec file; its continuous joints "
+                                                "are driven as revolute joints without position limits (one angle each)"),
                              examples=["robots/my_arm.urdf"])
     frames: dict[str, FrameSpec] = Field(
         default_factory=dict, description="extra frames by name (tool tips, cameras), usable wherever a frame is named",

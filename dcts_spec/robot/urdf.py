@@ -1,0 +1,49 @@
+"""A URDF read into the Pinocchio model the controller drives: one angle per rotating joint.
+
+Pinocchio models a URDF `continuous` joint by its cosine and sine (nq = 2, nv = 1), and every
+part of dcts (the spec's q, the QP data's inputs, the C bundle, the simulation's state) holds one
+position per joint. A continuous joint is read as what it is to the controller: a revolute joint
+about the same axis without position limits (its angle is not wrapped; a posture target is
+reached the short way only if it is given within π of the angle). Its effort and velocity limits
+stay. Mesh paths do not matter: the model holds kinematics and inertia only.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from xml.etree import ElementTree
+
+import pinocchio as pin
+
+UNLIMITED = "1e10"  # what Pinocchio (and JointLimits.of_model) read as no position limit
+
+
+def revolute_from_continuous(root: ElementTree.Element) -> list[str]:
+    """Make every continuous joint of a URDF tree a revolute joint without position limits (in
+    place); returns their names. urdfdom wants a revolute joint's <limit> with effort and velocity:
+    a missing one is 0, which Pinocchio and JointLimits read as none."""
+    names = []
+    for joint in root.iter("joint"):
+        if joint.get("type") != "continuous":
+            continue
+        joint.set("type", "revolute")
+        limit = joint.find("limit")
+        if limit is None:
+            limit = ElementTree.SubElement(joint, "limit")
+        limit.set("lower", f"-{UNLIMITED}")
+        limit.set("upper", UNLIMITED)
+        for attribute in ("effort", "velocity"):
+            limit.set(attribute, limit.get(attribute, "0"))
+        names.append(joint.get("name", "?"))
+    return names
+
+
+def build_model(path: Path) -> tuple[pin.Model, list[str]]:
+    """Pinocchio's model of the URDF at `path`, its continuous joints made revolute, and their
+    names. Raises what Pinocchio raises for a URDF it cannot read (and ElementTree's ParseError for
+    a file that is no XML)."""
+    root = ElementTree.parse(path).getroot()
+    continuous = revolute_from_continuous(root)
+    if not continuous:  # (the file as it is: urdfdom's messages name its lines)
+        return pin.buildModelFromUrdf(str(path)), []
+    return pin.buildModelFromXML(ElementTree.tostring(root, encoding="unicode")), continuous

@@ -1,0 +1,115 @@
+"""A URDF's continuous joints are driven as revolute joints without position limits (robot/urdf.py)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+
+from dcts_spec.controller import build_controller
+from dcts_spec.robot.describe import describe
+from dcts_spec.robot.model import JointLimits
+from dcts_spec.robot.urdf import build_model
+from dcts_spec.spec import load_spec
+from dcts_spec.validate import validate_spec
+
+INERTIAL = """<inertial><origin xyz="0.05 0.01 0.2"/><mass value="{m}"/>
+      <inertia ixx="0.03" iyy="0.02" izz="0.01" ixy="0.001" ixz="0" iyz="0.002"/></inertial>"""
+# A revolute shoulder, a continuous forearm roll (effort and velocity given) and a continuous
+# wrist without a <limit> element, about three different axes.
+URDF = f"""<robot name="roll_arm">
+  <link name="base"/>
+  <link name="upper">{INERTIAL.format(m=2.0)}</link>
+  <link name="forearm">{INERTIAL.format(m=1.5)}</link>
+  <link name="hand">{INERTIAL.format(m=0.5)}</link>
+  <joint name="shoulder" type="revolute"><parent link="base"/><child link="upper"/>
+    <origin xyz="0 0 0.1"/><axis xyz="0 1 0"/><limit lower="-2" upper="2" effort="80" velocity="2"/></joint>
+  <joint name="forearm_roll" type="continuous"><parent link="upper"/><child link="forearm"/>
+    <origin xyz="0 0 0.4" rpy="0.2 0 0"/><axis xyz="0 0 1"/><limit effort="30" velocity="3"/></joint>
+  <joint name="wrist_roll" type="continuous"><parent link="forearm"/><child link="hand"/>
+    <origin xyz="0 0 0.3"/><axis xyz="1 0 0"/></joint>
+  <link name="tool"/>
+  <joint name="tool_joint" type="fixed"><parent link="hand"/><child link="tool"/><origin xyz="0.1 0 0.05"/></joint>
+</robot>
+"""
+
+
+def _urdf(tmp_path: Path) -> Path:
+    path = tmp_path / "roll_arm.urdf"
+    path.write_text(URDF)
+    return path
+
+
+def _pinocchio_configuration(angles: np.ndarray) -> np.ndarray:
+    """The same configuration in Pinocchio's own model of the URDF: (cos, sin) per continuous joint."""
+    return np.array([angles[0], np.cos(angles[1]), np.sin(angles[1]), np.cos(angles[2]), np.sin(angles[2])])
+
+
+def test_a_continuous_joint_is_a_revolute_one_with_the_same_dynamics(tmp_path: Path) -> None:
+    """One angle per joint (nq = nv), no position limits, the URDF's effort and velocity kept; and
+    the mass matrix, the inverse dynamics and the tool's placement of Pinocchio's own model of the
+    file (cosine and sine per continuous joint) at the same angles."""
+    path = _urdf(tmp_path)
+    model, continuous = build_model(path)
+    assert continuous == ["forearm_roll", "wrist_roll"] and model.nq == model.nv == 3
+    limits = JointLimits.of_model(model)
+    assert np.isneginf(limits.q_min[1:]).all() and np.isposinf(limits.q_max[1:]).all()
+    assert limits.q_min[0] == -2 and limits.tau_max.tolist() == [80, 30, np.inf] and limits.v_max[1] == 3
+
+    original = pin.buildModelFromUrdf(str(path))
+    assert original.nq == 5
+    rng = np.random.default_rng(3)
+    for _ in range(5):
+        angles, v, a = rng.uniform(-4, 4, 3), rng.normal(size=3), rng.normal(size=3)
+        q = _pinocchio_configuration(angles)
+        ours, theirs = model.createData(), original.createData()
+        assert np.allclose(pin.crba(model, ours, angles), pin.crba(original, theirs, q), atol=1e-12)
+        assert np.allclose(pin.rnea(model, ours, angles, v, a), pin.rnea(original, theirs, q, v, a), atol=1e-12)
+        pin.framesForwardKinematics(model, ours, angles)
+        pin.framesForwardKinematics(original, theirs, q)
+        tool = ours.oMf[model.getFrameId("tool")], theirs.oMf[original.getFrameId("tool")]
+        assert np.allclose(tool[0].homogeneous, tool[1].homogeneous, atol=1e-12)
+
+
+def test_a_spec_drives_a_continuous_joint_and_locks_one_at_its_angle(tmp_path: Path) -> None:
+    """A spec on that URDF validates (the joint was refused before), locks the wrist at 0.7 rad
+    where the tool is where Pinocchio's own model puts it, and its controller steps with status ok.
+    `dcts describe` calls the forearm roll continuous."""
+    path = _urdf(tmp_path)
+    spec_file = tmp_path / "roll_arm.yaml"
+    spec_file.write_text(f"""version: 1
+name: roll_arm
+robot:
+  urdf: {path.name}
+  locked_joints: {{wrist_roll: 0.7}}
+tasks:
+  - name: tool
+    type: position
+    frame: tool
+    axes: [x]
+    priority: 1
+    gains: {{kp: 100, kd: 20}}
+    reference: {{position: [0.1, 0.0, 0.0]}}
+  - name: posture
+    type: joint
+    priority: 2
+    gains: {{kp: 10, kd: 6}}
+    reference: {{q: [0.3, 4.0]}}
+""")
+    spec = load_spec(spec_file)
+    robot = validate_spec(spec).robot
+    assert robot.joint_names == ["shoulder", "forearm_roll"]
+    angles = np.array([0.4, -2.5])
+    data = robot.model.createData()
+    pin.framesForwardKinematics(robot.model, data, angles)
+    original = pin.buildModelFromUrdf(str(path))
+    theirs = original.createData()
+    pin.framesForwardKinematics(original, theirs, _pinocchio_configuration(np.array([*angles, 0.7])))
+    assert np.allclose(data.oMf[robot.model.getFrameId("tool")].homogeneous,
+                       theirs.oMf[original.getFrameId("tool")].homogeneous, atol=1e-12)
+
+    result = build_controller(spec).step(angles, np.array([0.1, 2.0]), np.zeros(2))
+    assert result.status == 0 and np.isfinite(result.tau).all()
+    kinds = {joint.name: joint.type for joint in describe(str(path)).joints}
+    assert kinds == {"shoulder": "revolute", "forearm_roll": "continuous", "wrist_roll": "continuous"}
