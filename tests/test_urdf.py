@@ -8,6 +8,7 @@ import numpy as np
 import pinocchio as pin
 
 from dcts_spec.controller import build_controller
+from dcts_spec.limits.naming import joint_bound_text
 from dcts_spec.robot.describe import describe
 from dcts_spec.robot.model import JointLimits
 from dcts_spec.robot.urdf import build_model
@@ -100,6 +101,7 @@ tasks:
     spec = load_spec(spec_file)
     robot = validate_spec(spec).robot
     assert robot.joint_names == ["shoulder", "forearm_roll"]
+    assert joint_bound_text(robot, 1) == "|forearm_roll'| ≤ 3 rad/s"  # (what summary.json names a relaxed bound by)
     angles = np.array([0.4, -2.5])
     data = robot.model.createData()
     pin.framesForwardKinematics(robot.model, data, angles)
