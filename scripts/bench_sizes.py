@@ -65,7 +65,7 @@ def model_spec(model: Model) -> str:
     """The spec: all joints but the kept ones locked at the middle of their range; references are
     the arms' frames at the middle of the kept joints' ranges."""
     urdf = example_robot_data_dir() / model.urdf
-    full, _ = build_model(urdf)  # (a continuous joint as a revolute one without limits: the middle is 0)
+    full = build_model(urdf)  # (a continuous joint as a revolute one without limits: the middle is 0)
     middle = (full.lowerPositionLimit + full.upperPositionLimit) / 2
     names = list(full.names)[1:]
     kept = [n for n in names if n.startswith(model.keep)]

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+from xml.etree import ElementTree
 
 import numpy as np
 import pinocchio as pin
@@ -11,7 +12,7 @@ from dcts_spec.controller import build_controller
 from dcts_spec.limits.naming import joint_bound_text
 from dcts_spec.robot.describe import describe
 from dcts_spec.robot.model import JointLimits
-from dcts_spec.robot.urdf import build_model
+from dcts_spec.robot.urdf import build_model, revolute_from_continuous
 from dcts_spec.spec import load_spec
 from dcts_spec.validate import validate_spec
 
@@ -52,8 +53,9 @@ def test_a_continuous_joint_is_a_revolute_one_with_the_same_dynamics(tmp_path: P
     the mass matrix, the inverse dynamics and the tool's placement of Pinocchio's own model of the
     file (cosine and sine per continuous joint) at the same angles."""
     path = _urdf(tmp_path)
-    model, continuous = build_model(path)
-    assert continuous == ["forearm_roll", "wrist_roll"] and model.nq == model.nv == 3
+    assert revolute_from_continuous(ElementTree.parse(path).getroot()) == ["forearm_roll", "wrist_roll"]
+    model = build_model(path)
+    assert model.nq == model.nv == 3
     limits = JointLimits.of_model(model)
     assert np.isneginf(limits.q_min[1:]).all() and np.isposinf(limits.q_max[1:]).all()
     assert limits.q_min[0] == -2 and limits.tau_max.tolist() == [80, 30, np.inf] and limits.v_max[1] == 3

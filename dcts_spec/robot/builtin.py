@@ -63,7 +63,7 @@ def lock_joints(model: pin.Model, locked: dict[str, float]) -> pin.Model:
 
 def load_builtin_model(name: str) -> pin.Model:
     """Pinocchio model of a built-in robot, with its default joints locked."""
-    model, _ = build_model(builtin_urdf_path(name))
+    model = build_model(builtin_urdf_path(name))
     return lock_joints(model, builtin_locked_joints(name))
 
 

@@ -150,7 +150,7 @@ def describe(target: str) -> RobotDescription:
 def _load_urdf(path: Path) -> pin.Model:
     try:
         with _quiet_stderr():  # urdfdom prints its complaint itself; the message below says it
-            model, _ = build_model(path)
+            model = build_model(path)
     except Exception as error:  # Pinocchio raises plain RuntimeErrors for bad URDFs
         raise DescribeError(f"cannot load the URDF {path}: {error}") from None
     if model.nv == 0:

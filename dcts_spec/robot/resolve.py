@@ -80,7 +80,7 @@ def _load_model(spec: Spec, diags: list[Diagnostic]) -> tuple[pin.Model | None, 
             return None, path
     try:
         with _quiet_stderr():  # urdfdom prints its parser's complaint itself; the diagnostic says it
-            full, _ = build_model(path)
+            full = build_model(path)
     except Exception as exc:  # Pinocchio raises plain RuntimeErrors for bad URDFs
         diags.append(src.diagnostic(where, f"cannot load the URDF {path}: {exc}"))
         return None, path

@@ -38,12 +38,11 @@ def revolute_from_continuous(root: ElementTree.Element) -> list[str]:
     return names
 
 
-def build_model(path: Path) -> tuple[pin.Model, list[str]]:
-    """Pinocchio's model of the URDF at `path`, its continuous joints made revolute, and their
-    names. Raises what Pinocchio raises for a URDF it cannot read (and ElementTree's ParseError for
-    a file that is no XML)."""
+def build_model(path: Path) -> pin.Model:
+    """Pinocchio's model of the URDF at `path`, its continuous joints made revolute. Raises what
+    Pinocchio raises for a URDF it cannot read (and ElementTree's ParseError for a file that is
+    no XML)."""
     root = ElementTree.parse(path).getroot()
-    continuous = revolute_from_continuous(root)
-    if not continuous:  # (the file as it is: urdfdom's messages name its lines)
-        return pin.buildModelFromUrdf(str(path)), []
-    return pin.buildModelFromXML(ElementTree.tostring(root, encoding="unicode")), continuous
+    if not revolute_from_continuous(root):  # (the file as it is: urdfdom's messages name its lines)
+        return pin.buildModelFromUrdf(str(path))
+    return pin.buildModelFromXML(ElementTree.tostring(root, encoding="unicode"))
