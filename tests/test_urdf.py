@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 from xml.etree import ElementTree
 
+import casadi as ca
 import numpy as np
 import pinocchio as pin
 
@@ -113,7 +114,13 @@ tasks:
     assert np.allclose(data.oMf[robot.model.getFrameId("tool")].homogeneous,
                        theirs.oMf[original.getFrameId("tool")].homogeneous, atol=1e-12)
 
-    result = build_controller(spec).step(angles, np.array([0.1, 2.0]), np.zeros(2))
+    controller = build_controller(spec)
+    result = controller.step(angles, np.array([0.1, 2.0]), np.zeros(2))
     assert result.status == 0 and np.isfinite(result.tau).all()
+    # the posture (targets 0.3 and 4.0 rad) takes the short way round on the continuous joint only
+    problem = controller.problem
+    posture_error = ca.Function("e", [problem.q, problem.param], [problem.levels[-1].error])
+    error = np.array(posture_error([-3.7, 4.0 - 2 * np.pi + 0.1], problem.param_layout.defaults)).ravel()
+    assert np.allclose(error, [4.0, -0.1], atol=1e-12)
     kinds = {joint.name: joint.type for joint in describe(str(path)).joints}
     assert kinds == {"shoulder": "revolute", "forearm_roll": "continuous", "wrist_roll": "continuous"}

@@ -3,9 +3,8 @@
 Pinocchio models a URDF `continuous` joint by its cosine and sine (nq = 2, nv = 1), and every
 part of dcts (the spec's q, the QP data's inputs, the C bundle, the simulation's state) holds one
 position per joint. A continuous joint is read as what it is to the controller: a revolute joint
-about the same axis without position limits (its angle is not wrapped; a posture target is
-reached the short way only if it is given within π of the angle). Its effort and velocity limits
-stay. Mesh paths do not matter: the model holds kinematics and inertia only.
+about the same axis without position limits; its angle is not wrapped, and a joint task on it
+takes the short way round to its target (tasks/joint.py). Its effort and velocity limits stay. Mesh paths do not matter: the model holds kinematics and inertia only.
 """
 
 from __future__ import annotations

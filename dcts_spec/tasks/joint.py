@@ -10,14 +10,19 @@ from .base import Task, unit_text
 
 
 class JointTask(Task):
-    """Selected joints driven to q_d (or only damped): J is a selection matrix, J̇q̇ = 0."""
+    """Selected joints driven to q_d (or only damped): J is a selection matrix, J̇q̇ = 0.
+
+    A revolute joint without position limits (a URDF continuous joint: robot/urdf.py) takes the
+    short way round: its error q_d − q is wrapped into [−π, π], atan2(sin Δ, cos Δ)."""
 
     def __init__(self, name: str, priority: int, joint_indices: list[int], joint_names: list[str], nv: int,
-                 q: np.ndarray | None = None, units: list[str] | None = None, **kwargs):
+                 q: np.ndarray | None = None, units: list[str] | None = None, wrapped: list[bool] | None = None,
+                 **kwargs):
         super().__init__(name, priority, **kwargs)
         self.joint_indices = list(joint_indices)
         self.joint_names = list(joint_names)
         self.units = tuple(units) if units is not None else ("rad",) * len(self.joint_indices)
+        self.wrapped = tuple(wrapped) if wrapped is not None else (False,) * len(self.joint_indices)
         self.nv = nv
         self.q = None if q is None else np.asarray(q, dtype=float)
 
@@ -48,5 +53,9 @@ class JointTask(Task):
     def _terms(self, robot: SymbolicRobot, reference: dict[str, ca.SX]) -> tuple[ca.SX, ca.SX, ca.SX]:
         jacobian = ca.SX(ca.DM(self.selection_matrix()))
         q = robot.q[self.joint_indices]
-        error = reference["q"] - q if "q" in reference else ca.SX.zeros(self.dim)
+        if "q" not in reference:
+            return jacobian, ca.SX.zeros(self.dim), ca.SX.zeros(self.dim)
+        error = reference["q"] - q
+        for i in (i for i, wrapped in enumerate(self.wrapped) if wrapped):
+            error[i] = ca.atan2(ca.sin(error[i]), ca.cos(error[i]))
         return jacobian, ca.SX.zeros(self.dim), error
