@@ -749,7 +749,6 @@ def test_bench_runs(tmp_path):
     assert "Pinocchio" in text and "qp_data" in text
 
 
-
 def test_casadi_helpers_become_macros_with_the_virtual_machines_numbers(tmp_path):
     """patch_casadi_source turns CasADi's sq and fabs calls into macros: the compiled function gives
     what CasADi's virtual machine (the Python runtime) gives, NaN, ±inf and ±0 included."""

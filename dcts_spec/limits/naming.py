@@ -30,8 +30,8 @@ def joint_bound_text(robot: Robot, j: int) -> str:
     name, lim = robot.joint_names[j], robot.limits
     unit = joint_unit(robot, j)
     # (a joint without position limits, as a URDF continuous joint: its speed only)
-    positioned = np.isfinite(lim.q_min[j]) or np.isfinite(lim.q_max[j]) or not np.isfinite(lim.v_max[j])
-    parts = [interval_text(name, lim.q_min[j], lim.q_max[j], unit)] if positioned else []
+    unbounded = lim.unbounded(j) and np.isfinite(lim.v_max[j])
+    parts = [] if unbounded else [interval_text(name, lim.q_min[j], lim.q_max[j], unit)]
     if np.isfinite(lim.v_max[j]):
         parts.append(f"|{name}'| ≤ {lim.v_max[j]:.4g} {unit}/s")
     return ", ".join(parts)

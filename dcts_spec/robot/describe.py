@@ -166,9 +166,9 @@ def _description(name: str, source: str, urdf: Path, model: pin.Model, limits: J
         kind = _joint_type(joint.shortname())
         unit = "m" if kind == "prismatic" else "rad"
         q, v = joint.idx_q, joint.idx_v
-        position = Limit(_finite(limits.q_min[q]), _finite(limits.q_max[q]), unit)
-        if kind == "revolute" and position.min is None and position.max is None:
+        if kind == "revolute" and limits.unbounded(q):
             kind = "continuous"  # (a URDF continuous joint, read as a revolute one: robot/urdf.py)
+        position = Limit(_finite(limits.q_min[q]), _finite(limits.q_max[q]), unit)
         joints.append(Joint(model.names[jid], kind, position, Limit(None, _finite(limits.v_max[v]), f"{unit}/s"),
                             Limit(None, _finite(limits.tau_max[v]), "N" if unit == "m" else "Nm")))
     frames = [Frame(f.name, FRAME_KINDS.get(f.type, str(f.type)), model.names[f.parentJoint])

@@ -19,6 +19,10 @@ class JointLimits:
     tau_max: np.ndarray
     a_max: np.ndarray  # inf unless the spec gives joint accelerations
 
+    def unbounded(self, j: int) -> bool:
+        """Has joint j no position limit on either side (a URDF continuous joint: robot/urdf.py)?"""
+        return bool(np.isinf(self.q_min[j]) and np.isinf(self.q_max[j]))
+
     @staticmethod
     def of_model(model: pin.Model) -> "JointLimits":
         """The limits a URDF declares (Pinocchio stores 0 or a huge number where none is given)."""

@@ -45,9 +45,7 @@ def make_task(spec: TaskSpec, robot: Robot) -> Task:
         indices = [robot.joint_names.index(j) for j in names]
         q = None if ref is None or ref.q is None else np.array(to_si(list(ref.q), ref.unit))
         units = [joint_unit(robot, j) for j in indices]
-        # (a revolute joint without position limits: a URDF continuous joint)
-        wrapped = [unit == "rad" and np.isinf(robot.limits.q_min[j]) and np.isinf(robot.limits.q_max[j])
-                   for unit, j in zip(units, indices, strict=True)]
+        wrapped = [unit == "rad" and robot.limits.unbounded(j) for unit, j in zip(units, indices, strict=True)]
         return JointTask(spec.name, spec.priority, indices, names, robot.nv, q=q, units=units, wrapped=wrapped,
                          **common)
     position = None if ref is None or ref.position is None else np.array(ref.position)
