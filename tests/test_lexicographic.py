@@ -654,3 +654,28 @@ def test_fixed_variables_eliminated_give_the_qp_with_them_fixed(robot):
     lower = np.concatenate((point, np.full(cascade.lba.size, -1e30)))
     x, flag = daqp_qp(cascade.H, cascade.f, FixedEliminated.of(cascade.A, lower, lower.copy()))
     assert flag == 1 and np.array_equal(x, point)
+
+
+def test_a_row_that_sees_no_free_variable_is_checked_on_its_own_scale():
+    """A row whose free coefficients are zero (or rounding) has a value the QP cannot change. At its
+    bound up to rounding with a fixed variable of 1e5, its bound shifted by A_c x_c is one ulp of
+    1e5 (1.5e-11) away from 0, which DAQP checks with an absolute 1e-11 and calls infeasible
+    (C and Python parted this way on a 16-joint hand with 4 levels). Such a row goes to DAQP
+    without bounds, and the stage's check on the rows, relative to the bound, decides: it holds
+    here (1.5e-16 relative), and a row crossed for real still makes the stage fail."""
+    from dcts_spec.solve.lexicographic import Cascade, FixedEliminated, daqp_qp
+
+    fixed = 1e5
+    H, f = np.eye(3), np.array([0.0, 5.0, -1.0])  # (its minimum without rows crosses a bound: DAQP
+    # forms its LDP, where it checks zero rows, instead of returning the unconstrained minimum)
+    A = np.array([[1.0, 1e-17, 0.0],  # sees x0 only (the 1e-17: rounding)
+                  [0.0, 1.0, 1.0]])
+    above = np.nextafter(fixed, np.inf)  # the row's lower bound, one ulp above x0's value
+    lower = np.array([fixed, -1.0, -1.0, above, -1.0])
+    upper = np.array([fixed, 1.0, 1.0, 1e30, 1.0])
+    x, flag = daqp_qp(H, f, FixedEliminated.of(A, lower, upper))
+    assert flag == 1 and x[0] == fixed and np.allclose(x[1:], [-1.0, 1.0])
+    cascade = Cascade(H, f, A, lower[:3], upper[:3], lower[3:], upper[3:], Structure(range(0), ()))
+    assert cascade._solve(H, f, lower[:3], upper[:3]) is not None
+    crossed = Cascade(H, f, A, lower[:3], upper[:3], np.array([fixed + 1.0, -1.0]), upper[3:], Structure(range(0), ()))
+    assert crossed._solve(H, f, lower[:3], upper[:3]) is None

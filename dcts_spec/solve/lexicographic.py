@@ -76,6 +76,9 @@ FEASIBILITY_TOLERANCE = 1e-7
 # A joint or Cartesian acceleration bound holds if it is crossed by at most this much, relative
 # to max(1, |bound|) (rad/s² or m/s²): over a 1 ms period ~5e-13 m or rad of position.
 BOUND_TOLERANCE = 1e-6
+# A row of a QP with fixed variables eliminated whose free coefficients are at most this times its
+# largest one sees no free variable (FixedEliminated): its rounding residue is ~1e-16.
+CONSTANT_ROW = 1e-12
 
 
 @dataclass(frozen=True)
@@ -118,7 +121,14 @@ class FixedEliminated:
     eliminated: DAQP solves for the free ones, min ½x_fᵀH_ff x_f + (f_f + H_fc x_c)ᵀx_f with the
     rows shifted by A_c x_c. The same solution (H is positive definite), but DAQP's setup (the
     Cholesky of H, A R⁻¹) and working set shrink from every variable to the 2–3 a stage leaves
-    free, instead of holding the others (7 of the bench spec's 9) as equalities."""
+    free, instead of holding the others (7 of the bench spec's 9) as equalities.
+
+    A row that sees no free variable (`constant_rows`) has a value the QP cannot change: DAQP gets
+    it without bounds, and the caller's check of every row on the answer decides whether it holds.
+    Given to DAQP, such a row is a "zero row" it calls infeasible when 0 is outside its shifted
+    bounds by more than 1e-11, absolute: after a bend, a row at its bound with fixed variables of
+    ~1e5 is off by rounding more than that, and C and Python parted (one called the final QP
+    infeasible, the other not; a 16-joint hand with 4 levels)."""
 
     free: np.ndarray  # indices of the free variables
     point: np.ndarray  # the fixed variables' values, 0 at the free ones
@@ -139,10 +149,12 @@ class FixedEliminated:
         layout = None if layouts is None else layouts.get(key)
         if layout is None:
             free = np.flatnonzero(~fixed)
-            layout = free, np.ascontiguousarray(A[:, free]), np.ix_(free, free)
+            A_free = np.ascontiguousarray(A[:, free])
+            constant = n + np.flatnonzero(constant_rows(A, A_free))
+            layout = free, A_free, np.ix_(free, free), constant
             if layouts is not None:
                 layouts[key] = layout
-        free, A_free, index = layout
+        free, A_free, index, constant = layout
         if free.size == n:
             point = np.zeros(n)
         else:
@@ -150,7 +162,18 @@ class FixedEliminated:
             shift = A @ point
             lower = np.concatenate((lower[free], lower[n:] - shift))
             upper = np.concatenate((upper[free], upper[n:] - shift))
+        if constant.size:
+            lower, upper = lower.copy(), upper.copy()
+            constant = constant - n + free.size  # (in DAQP's [x_f; A_f x_f])
+            lower[constant], upper[constant] = -DAQP_INF, DAQP_INF
         return cls(free, point, A_free, lower, upper, index)
+
+
+def constant_rows(A: np.ndarray, A_free: np.ndarray) -> np.ndarray:
+    """The rows whose coefficients of the free variables are nothing but rounding: at most
+    CONSTANT_ROW × the row's largest coefficient (all zero in exact arithmetic, ~1e-16 relative
+    in the QP data)."""
+    return np.abs(A_free).max(axis=1, initial=0.0) <= CONSTANT_ROW * np.abs(A).max(axis=1, initial=0.0)
 
 
 def daqp_qp(H: np.ndarray, f: np.ndarray, qp: FixedEliminated) -> tuple[np.ndarray | None, int]:
