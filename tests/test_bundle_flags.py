@@ -14,7 +14,9 @@ import pytest
 from command_line import MINIMAL
 from dcts_spec.codegen import bench as bench_module
 from dcts_spec.codegen import compile_bundle
-from dcts_spec.codegen.flags import C_WARNINGS, HOST_OPTIMIZATION, QP_DATA_O1_FROM, qp_data_optimization
+from dcts_spec.codegen import CodegenError
+from dcts_spec.codegen import bundle as bundle_module
+from dcts_spec.codegen.flags import C_WARNINGS, HOST_OPTIMIZATION, QP_DATA_O0_FROM, QP_DATA_O1_FROM, qp_data_optimization
 
 
 @pytest.fixture(scope="module")
@@ -71,6 +73,8 @@ def test_the_qp_data_get_o1_from_a_size_on(sources: Path) -> None:
     for its own size, takes QP_DATA_OPT, and an OPT given on the command line applies to all."""
     assert qp_data_optimization(QP_DATA_O1_FROM - 1) == HOST_OPTIMIZATION
     assert qp_data_optimization(QP_DATA_O1_FROM) == ("-O1",)
+    assert qp_data_optimization(QP_DATA_O0_FROM - 1) == ("-O1",)
+    assert qp_data_optimization(QP_DATA_O0_FROM) == ("-O0",)  # (-O1 took minutes from there)
     makefile = (sources / "Makefile").read_text()
     assert re.search(r"^QP_DATA_OPT \?= (.*)$", makefile, re.M).group(1).split() == list(HOST_OPTIMIZATION)  # (small)
     commands = _compile_commands(sources, "QP_DATA_OPT=-O1")
@@ -87,3 +91,17 @@ def test_outputs_are_checked_once_not_at_every_store(sources: Path) -> None:
     text = (sources / "minimal_casadi.c").read_text()
     assert "if (res[" not in text and re.search(r"^  if \(!res\[0\] \|\| !res\[1\].*\) return 1;$", text, re.M)
     assert re.search(r"^  res\[0\]\[0\]=a\d+;$", text, re.M)
+
+
+def test_qp_data_too_large_for_a_compiler_are_refused_before_any_c(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """QP data beyond MAX_QP_DATA_OPERATIONS (the projector baseline on a 21-joint human model:
+    ~3 M operations, 74 MB of C, more memory than gcc had) are refused before any C is written,
+    with what to do instead; nothing is left at the output path."""
+    monkeypatch.setattr(bundle_module, "MAX_QP_DATA_OPERATIONS", 100)
+    out = tmp_path / "bundle"
+    with pytest.raises(CodegenError) as refused:
+        compile_bundle(MINIMAL, out, build=False)
+    message = str(refused.value)
+    assert "operations for its QP data" in message and "more than the 100" in message
+    assert "--formulation dcts" in message and "--runtime python" in message
+    assert not out.exists()

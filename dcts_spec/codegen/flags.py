@@ -20,10 +20,19 @@ C_WARNINGS: tuple[str, ...] = ("-std=c99", "-Wall", "-Wextra", "-Werror", "-peda
 # data's instructions and saves ~1 s. Splitting the function into 7 files instead cut the peak
 # memory to 0.29 GB but not the time (2 cores: 36 s of wall time for 64 s of CPU).
 QP_DATA_O1_FROM = 40_000  # QP-data operations from which the QP data are compiled with -O1
+# Larger still, -O1 too takes minutes: the projector baseline's closed form on a 16-joint hand
+# (235 k operations, 5.6 MB of C) took gcc 280 s at -O1, 29 s and 2.9 GB at -O0. dcts's own QP
+# data stay below 100 k operations up to 29 joints.
+QP_DATA_O0_FROM = 150_000
+# No bundle beyond this: gcc needs ~12 kB per operation of one function even at -O0, and the same
+# baseline on a 21-joint human model (~3 M operations, 74 MB of C) ran it out of memory.
+MAX_QP_DATA_OPERATIONS = 500_000
 
 
 def qp_data_optimization(operations: int) -> tuple[str, ...]:
     """The optimization flags of the QP data's C file (the rest of the bundle: HOST_OPTIMIZATION)."""
+    if operations >= QP_DATA_O0_FROM:
+        return ("-O0",)
     return ("-O1",) if operations >= QP_DATA_O1_FROM else HOST_OPTIMIZATION
 
 
