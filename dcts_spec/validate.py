@@ -102,7 +102,7 @@ class ValidationReport:
             lines.append(f"  priority {lv.priority}  dim {lv.dimension}, rank {lv.rank} of {lv.free_before} free: {tasks}")
 
         def fmt(a: np.ndarray, scale: float = 1.0) -> str:
-            return "[" + ", ".join("∞" if not np.isfinite(v) else f"{v * scale:.4g}" for v in a) + "]"
+            return "[" + ", ".join(("∞" if v > 0 else "-∞") if not np.isfinite(v) else f"{v * scale:.4g}" for v in a) + "]"
 
         deg = 180.0 / np.pi
         lines.append(f"  limits      q ∈ {fmt(lim.q_min, deg)} .. {fmt(lim.q_max, deg)} deg")

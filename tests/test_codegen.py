@@ -850,3 +850,23 @@ def test_unseen_robots_pass_their_golden_test(name, tmp_path):
     spec.write_text(UNSEEN_ROBOTS[name].format(urdf=example_robot_data_dir()))
     report = compile_bundle(spec, tmp_path / "bundle")  # a failed golden test raises CodegenError
     assert report.manifest["built"] and "126 golden vectors" in report.manifest["host"]["test_summary"]
+
+
+def test_a_two_joint_robot_builds_and_passes_its_golden_test(tmp_path):
+    """The bundle's own test poked joints 1 and 2 with non-finite inputs: for a robot of 1 or 2
+    joints it did not compile (-Werror=array-bounds), so no such robot could be compiled."""
+    from dcts_spec.robot.builtin import example_robot_data_dir
+
+    urdf = example_robot_data_dir() / "double_pendulum_description" / "urdf" / "double_pendulum.urdf"
+    spec = tmp_path / "pendulum.yaml"
+    spec.write_text(f"""version: 1
+name: pendulum
+robot:
+  urdf: {urdf}
+limits:
+  joint_torque: {{max: 5}}
+tasks:
+  - {{name: posture, type: joint, priority: 1, gains: {{kp: 10, kd: 6}}, reference: {{q: [0.5, -0.5]}}}}
+""")
+    report = compile_bundle(spec, tmp_path / "bundle", golden_count=24)
+    assert report.manifest["built"] and "golden vectors" in report.manifest["host"]["test_summary"]

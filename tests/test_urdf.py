@@ -124,3 +124,33 @@ tasks:
     assert np.allclose(error, [4.0, -0.1], atol=1e-12)
     kinds = {joint.name: joint.type for joint in describe(str(path)).joints}
     assert kinds == {"shoulder": "revolute", "forearm_roll": "continuous", "wrist_roll": "continuous"}
+
+
+PENDULUM = """version: 1
+name: pendulum
+robot:
+  urdf: {urdf}
+{limits}tasks:
+  - {{name: posture, type: joint, priority: 1, gains: {{kp: 10, kd: 6}}, reference: {{q: [0.5, -0.5]}}}}
+"""
+
+
+def test_a_joint_whose_urdf_range_is_empty_has_no_position_limits(tmp_path):
+    """example-robot-data's double pendulum gives its revolute joints <limit lower="0" upper="0">
+    (and effort and velocity 0): meant as no limits, as an effort of 0 is. Read as [0, 0] they were
+    held still by their own position bounds, silently. They are now driven without position
+    limits, with a warning naming them, unless the spec gives limits.joint_position."""
+    from dcts_spec.robot.builtin import example_robot_data_dir
+
+    urdf = example_robot_data_dir() / "double_pendulum_description" / "urdf" / "double_pendulum.urdf"
+    spec = tmp_path / "pendulum.yaml"
+    spec.write_text(PENDULUM.format(urdf=urdf, limits=""))
+    report = validate_spec(load_spec(spec))
+    assert np.all(np.isneginf(report.robot.limits.q_min)) and np.all(np.isposinf(report.robot.limits.q_max))
+    (warning,) = [d for d in report.diagnostics if "no position range" in d.message]
+    assert "joint1, joint2" in warning.message and "limits.joint_position" in warning.message
+    assert "q ∈ [-∞, -∞] .. [∞, ∞] deg" in report.summary()
+    spec.write_text(PENDULUM.format(urdf=urdf, limits="limits:\n  joint_position: {min: -1, max: 1}\n"))
+    report = validate_spec(load_spec(spec))
+    assert np.array_equal(report.robot.limits.q_max, [1.0, 1.0])
+    assert not [d for d in report.diagnostics if "no position range" in d.message]

@@ -25,8 +25,10 @@ class JointLimits:
 
     @staticmethod
     def of_model(model: pin.Model) -> "JointLimits":
-        """The limits a URDF declares (Pinocchio stores 0 or a huge number where none is given)."""
+        """The limits a URDF declares (Pinocchio stores 0 or a huge number where none is given).
+        A joint whose lower and upper position limits are equal has none (`no_position_range`)."""
         n = model.nv
+        none = no_position_range(model)
 
         def clean(values: np.ndarray, missing_if_zero: bool) -> np.ndarray:
             out = np.array(values, dtype=float)
@@ -37,12 +39,20 @@ class JointLimits:
             return out
 
         return JointLimits(
-            q_min=clean(model.lowerPositionLimit, False),
-            q_max=clean(model.upperPositionLimit, False),
+            q_min=np.where(none, -np.inf, clean(model.lowerPositionLimit, False)),
+            q_max=np.where(none, np.inf, clean(model.upperPositionLimit, False)),
             v_max=clean(model.velocityLimit, True),
             tau_max=clean(model.effortLimit, True),
             a_max=np.full(n, np.inf),
         )
+
+
+def no_position_range(model: pin.Model) -> np.ndarray:
+    """Per joint: are its URDF position limits equal (a revolute joint whose <limit> gives only
+    zeros, as example-robot-data's double pendulum)? Such a joint is meant to turn freely, as an
+    effort or velocity of 0 means no limit; MuJoCo ignores such a range too. Read as [0, 0], it
+    would be held still by its own position bound."""
+    return np.asarray(model.lowerPositionLimit == model.upperPositionLimit, dtype=bool)
 
 
 @dataclass(frozen=True)

@@ -18,7 +18,7 @@ from ..spec.source import SourceMap
 from ..spec.types import as_list, size_of
 from ..spec.units import to_si
 from .builtin import builtin_locked_joints, builtin_urdf_path, lock_joints
-from .model import CartesianBound, JointLimits, Robot
+from .model import CartesianBound, JointLimits, Robot, no_position_range
 from .urdf import build_model
 
 AXIS_INDEX = {"x": 0, "y": 1, "z": 2}
@@ -35,6 +35,11 @@ def resolve_robot(spec: Spec) -> tuple[Robot, list[Diagnostic]]:
     _check_joint_types(model, src, diags)
     _add_frames(spec, model, diags)
     urdf_limits = JointLimits.of_model(model)
+    free = [model.names[j] for j in range(1, model.njoints) if no_position_range(model)[model.joints[j].idx_q]]
+    if free and not spec.limits.joint_position:
+        diags.append(src.diagnostic(
+            ("robot",), f"the URDF gives {', '.join(free)} no position range (lower = upper): driven without position "
+                        f"limits; give limits.joint_position to bound them", "warning"))
     limits = _merge_limits(spec, urdf_limits, model.nv, diags)
     bounds = _cartesian_bounds(spec, model, diags)
     if any(d.severity == "error" for d in diags):
