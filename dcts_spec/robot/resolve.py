@@ -35,11 +35,12 @@ def resolve_robot(spec: Spec) -> tuple[Robot, list[Diagnostic]]:
     _check_joint_types(model, src, diags)
     _add_frames(spec, model, diags)
     urdf_limits = JointLimits.of_model(model)
-    free = [model.names[j] for j in range(1, model.njoints) if no_position_range(model)[model.joints[j].idx_q]]
-    if free and not spec.limits.joint_position:
+    empty = no_position_range(model)
+    rangeless = [model.names[j] for j in range(1, model.njoints) if empty[model.joints[j].idx_q]]
+    if rangeless and not spec.limits.joint_position:
         diags.append(src.diagnostic(
-            ("robot",), f"the URDF gives {', '.join(free)} no position range (lower = upper): driven without position "
-                        f"limits; give limits.joint_position to bound them", "warning"))
+            ("robot",), f"the URDF gives {', '.join(rangeless)} no position range (lower = upper): driven without "
+                        f"position limits; give limits.joint_position to bound them", "warning"))
     limits = _merge_limits(spec, urdf_limits, model.nv, diags)
     bounds = _cartesian_bounds(spec, model, diags)
     if any(d.severity == "error" for d in diags):

@@ -150,8 +150,7 @@ class FixedEliminated:
         if layout is None:
             free = np.flatnonzero(~fixed)
             A_free = np.ascontiguousarray(A[:, free])
-            constant = n + np.flatnonzero(constant_rows(A, A_free))
-            layout = free, A_free, np.ix_(free, free), constant
+            layout = free, A_free, np.ix_(free, free), np.flatnonzero(constant_rows(A, A_free))
             if layouts is not None:
                 layouts[key] = layout
         free, A_free, index, constant = layout
@@ -162,10 +161,9 @@ class FixedEliminated:
             shift = A @ point
             lower = np.concatenate((lower[free], lower[n:] - shift))
             upper = np.concatenate((upper[free], upper[n:] - shift))
-        if constant.size:
+        if constant.size:  # (rows of A; in DAQP's [x_f; A_f x_f] after the free variables)
             lower, upper = lower.copy(), upper.copy()
-            constant = constant - n + free.size  # (in DAQP's [x_f; A_f x_f])
-            lower[constant], upper[constant] = -DAQP_INF, DAQP_INF
+            lower[free.size + constant], upper[free.size + constant] = -DAQP_INF, DAQP_INF
         return cls(free, point, A_free, lower, upper, index)
 
 
