@@ -21,6 +21,7 @@ import typer
 from typer.core import TyperCommand, TyperGroup
 
 from .choices import RUNTIMES, TARGETS
+from .files import request_stop, stop_signal
 from .phases import phase, reporting
 from .spec import SpecError
 from .spec.controller import Formulation
@@ -436,6 +437,7 @@ def init(
 def _exit_on_sigterm(signum: int, _frame) -> None:
     # SIGTERM's default ends the process at once; as an exit, the staging folders of a compile
     # or a run are removed on the way out, as on Ctrl-C
+    request_stop(signum)
     sys.exit(128 + signum)
 
 
@@ -452,3 +454,6 @@ def main() -> None:
             raise
         typer.echo(f"error: {type(error).__name__}: {error} (set DCTS_DEBUG=1 to see the traceback)", err=True)
         sys.exit(INTERNAL_ERROR)
+    finally:
+        if (signum := stop_signal()) is not None:  # even if the handler's SystemExit was lost
+            sys.exit(128 + signum)

@@ -19,6 +19,8 @@ OWNED = ".dcts-owned"  # JSON list of the top-level names dcts wrote
 # A staging folder this old was left by a run that was killed (SIGKILL, a power cut): a live run
 # finishes its staging in minutes, and a younger one may belong to a run still going.
 STALE_STAGING_SECONDS = 3600.0
+# The signal that asked this process to stop (see `request_stop`), or None
+_stop_signal: int | None = None
 
 
 class OutputFolderError(Exception):
@@ -43,8 +45,24 @@ def check_writable(folder: Path, allow_unmarked=lambda folder: False) -> None:
                                 "to write into it; choose another output folder (dcts never deletes files it did not write)")
 
 
+def request_stop(signum: int) -> None:
+    """Record that a signal (SIGTERM) asked this process to stop: from now on `install` refuses.
+    The signal handler's exception alone is not enough: Python drops one raised while a finalizer
+    (`__del__`, a weakref callback) runs, and the command would then finish and install its output."""
+    global _stop_signal
+    _stop_signal = signum
+
+
+def stop_signal() -> int | None:
+    """The signal `request_stop` recorded, or None."""
+    return _stop_signal
+
+
 def install(staging: Path, folder: Path) -> None:
-    """Move the finished `staging` folder's entries into `folder` (see the module docstring)."""
+    """Move the finished `staging` folder's entries into `folder` (see the module docstring);
+    after `request_stop`, raise SystemExit instead (the caller removes its staging folder)."""
+    if _stop_signal is not None:
+        raise SystemExit(128 + _stop_signal)
     staging, folder = Path(staging), Path(folder)
     new = sorted(p.name for p in staging.iterdir() if p.name != OWNED)
     (staging / OWNED).write_text(json.dumps(new) + "\n")

@@ -1,5 +1,6 @@
 """Build steps (codegen/process.py): a time-out ends make and every process it started, the
-time-out is configurable, and a long step says what it compiles and how long it has run."""
+time-out is configurable, a long step says what it compiles and how long it has run, and DAQP's
+sources are fetched once, whole."""
 
 from __future__ import annotations
 
@@ -11,6 +12,7 @@ import pytest
 from dcts_spec.codegen import CodegenError
 from dcts_spec.codegen import process as process_module
 from dcts_spec.codegen.build import make
+from dcts_spec.codegen.bundle import DAQP_VERSION
 from dcts_spec.codegen.process import build_timeout, run
 from dcts_spec.phases import reporting
 
@@ -101,3 +103,22 @@ def test_interrupt_ends_the_group(tmp_path: Path, monkeypatch: pytest.MonkeyPatc
     monkeypatch.undo()
     child = int((tmp_path / "child.pid").read_text())
     assert _wait_dead(child), f"the build's child {child} survived the interrupt"
+
+
+def test_parallel_first_downloads_of_daqp_each_get_the_complete_sources(tmp_path):
+    # on a fresh machine pytest-xdist's workers all fetch DAQP at once; one must never compile
+    # another's half-unpacked copy
+    from concurrent.futures import ThreadPoolExecutor
+
+    from dcts_spec.codegen import daqp_sources
+
+    with ThreadPoolExecutor(2) as pool:
+        futures = [pool.submit(daqp_sources, tmp_path) for _ in range(2)]
+    try:
+        found = {future.result() for future in futures}
+    except CodegenError as error:
+        pytest.skip(f"DAQP sources unavailable: {error}")
+    assert found == {tmp_path / "daqp" / f"daqp-{DAQP_VERSION}" / "csrc"}
+    csrc = found.pop()
+    assert {p.name for p in (csrc / "src").iterdir()} >= {"api.c", "daqp.c", "factorization.c", "auxiliary.c"}
+    assert [p.name for p in (tmp_path / "daqp").iterdir()] == [f"daqp-{DAQP_VERSION}"]  # no private folder left

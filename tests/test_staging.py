@@ -10,7 +10,10 @@ import sys
 import time
 from pathlib import Path
 
-from dcts_spec.files import STALE_STAGING_SECONDS, remove_stale_staging
+import pytest
+
+from dcts_spec import cli, files
+from dcts_spec.files import STALE_STAGING_SECONDS, install, remove_stale_staging
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -27,9 +30,29 @@ def test_sigterm_during_compile_leaves_no_staging_folder(tmp_path):
         time.sleep(0.05)
     assert process.poll() is None, "the compile ended before its staging folder could be seen"
     process.send_signal(signal.SIGTERM)
-    process.wait(timeout=60)
-    assert process.returncode == 128 + signal.SIGTERM
+    _, stderr = process.communicate(timeout=60)
+    assert process.returncode == 128 + signal.SIGTERM, stderr.decode(errors="replace")[-3000:]
     assert not list(tmp_path.glob(".bundle.tmp-*")) and not out.exists()
+
+
+def test_after_a_stop_request_nothing_is_installed_and_the_command_exits_with_the_signal(tmp_path, monkeypatch):
+    # Python drops a signal handler's SystemExit raised while a finalizer runs (CI saw a SIGTERMed
+    # compile exit 0); the recorded request must still keep the output out and the exit code right
+    staging, out = tmp_path / ".out.tmp-1", tmp_path / "out"
+    staging.mkdir()
+    (staging / "file").write_text("x")
+    monkeypatch.setattr(files, "_stop_signal", None)
+    install(staging, out)
+    assert (out / "file").is_file()
+    staging.mkdir()
+    monkeypatch.setattr(files, "_stop_signal", signal.SIGTERM)
+    with pytest.raises(SystemExit) as stopped:
+        install(staging, tmp_path / "other")
+    assert stopped.value.code == 128 + signal.SIGTERM and not (tmp_path / "other").exists()
+    monkeypatch.setattr(cli, "app", lambda: None)  # a command that finished as if never signalled
+    with pytest.raises(SystemExit) as exited:
+        cli.main()
+    assert exited.value.code == 128 + signal.SIGTERM
 
 
 def test_the_next_run_removes_only_old_staging_folders_of_its_output(tmp_path):

@@ -44,26 +44,36 @@ HEAP_LINE = re.compile(r"heap: init (\d+) calls (\d+) bytes; steps (\d+) calls")
 
 def daqp_sources(cache: Path | None = None, version: str = DAQP_VERSION) -> Path:
     """DAQP's C sources (csrc/ with include/ and src/) from its PyPI source distribution,
-    downloaded once into the cache with pip (never into the project)."""
+    downloaded once into the cache with pip (never into the project). Downloaded and unpacked in
+    a private folder, then renamed into place: parallel compiles (pytest-xdist on a fresh machine)
+    never see another's half-written sources."""
     cache = (cache or CACHE_DIR) / "daqp"
     csrc = cache / f"daqp-{version}" / "csrc"
     if (csrc / "src" / "api.c").is_file():
         return csrc
     cache.mkdir(parents=True, exist_ok=True)
-    archive = cache / f"daqp-{version}.tar.gz"
-    if not archive.is_file():
+    private = Path(tempfile.mkdtemp(prefix=".tmp-", dir=cache))
+    try:
+        archive = private / f"daqp-{version}.tar.gz"
         phase(f"downloading DAQP {version}'s C sources with pip")
         command = [sys.executable, "-m", "pip", "download", "--no-binary", ":all:", "--no-deps",
-                   f"daqp=={version}", "-d", str(cache)]
+                   f"daqp=={version}", "-d", str(private)]
         done = subprocess.run(command, capture_output=True, text=True)
         if done.returncode != 0 or not archive.is_file():
             raise CodegenError(f"could not download DAQP {version}'s sources with pip:\n{tail(done.stdout + done.stderr)}")
-    with tarfile.open(archive) as tar:
-        members = [m for m in tar.getmembers() if (m.name.startswith(f"daqp-{version}/csrc/") or m.name == f"daqp-{version}/LICENSE")
-                   and (m.isfile() or m.isdir())]
-        tar.extractall(cache, members=members, filter="data")
-    if not (csrc / "src" / "api.c").is_file():
-        raise CodegenError(f"DAQP's source distribution has no csrc/src/api.c ({archive})")
+        with tarfile.open(archive) as tar:
+            members = [m for m in tar.getmembers() if (m.name.startswith(f"daqp-{version}/csrc/") or m.name == f"daqp-{version}/LICENSE")
+                       and (m.isfile() or m.isdir())]
+            tar.extractall(private, members=members, filter="data")
+        if not (private / f"daqp-{version}" / "csrc" / "src" / "api.c").is_file():
+            raise CodegenError(f"DAQP's source distribution has no csrc/src/api.c ({archive})")
+        try:
+            os.rename(private / f"daqp-{version}", cache / f"daqp-{version}")
+        except OSError:
+            if not (csrc / "src" / "api.c").is_file():  # not another process's copy: a real failure
+                raise
+    finally:
+        shutil.rmtree(private, ignore_errors=True)
     return csrc
 
 
