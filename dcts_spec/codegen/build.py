@@ -56,7 +56,9 @@ def daqp_sources(cache: Path | None = None, version: str = DAQP_VERSION) -> Path
     try:
         archive = private / f"daqp-{version}.tar.gz"
         phase(f"downloading DAQP {version}'s C sources with pip")
-        command = [sys.executable, "-m", "pip", "download", "--no-binary", ":all:", "--no-deps",
+        # --no-binary daqp, not :all:, which also builds DAQP's build tools (Cython) from source
+        # to read its metadata: minutes on a machine whose pip cache is empty
+        command = [sys.executable, "-m", "pip", "download", "--no-binary", "daqp", "--no-deps",
                    f"daqp=={version}", "-d", str(private)]
         done = subprocess.run(command, capture_output=True, text=True)
         if done.returncode != 0 or not archive.is_file():
