@@ -245,17 +245,18 @@ class Controller:
         """The lexicographic solution at the data (None if DAQP failed)."""
         return solve_lexicographic(*self._qp(data), self._structure)
 
-    def answer_spread(self, q, dq, tau_ext, ref, x: np.ndarray, samples: int, enough: float) -> float:
+    def answer_spread(self, q, dq, tau_ext, ref, x: np.ndarray, samples: int, enough: float) -> np.ndarray:
         """How far the last step's answer x (its QP solution, at this state) is determined by its QP
-        data: the largest relative change of τ, q̈ and x when the data change at the level of their
-        rounding (`solve/sensitivity.py`; `samples` solves, stopping above `enough`). 0 without a QP."""
+        data: [the command's, the solution's] largest relative change when the data change at the
+        level of their rounding (`solve/sensitivity.py`; `samples` solves, stopping once both are
+        above `enough`), the command being τ and q̈, the solution x. Zeros without a QP."""
         if not self.nx:
-            return 0.0
+            return np.zeros(2)
         data = self.evaluate_data(q, dq, tau_ext, ref)
 
-        def outputs(answer: np.ndarray) -> np.ndarray:
-            return np.concatenate([data["tau0"].ravel() + data["T"] @ answer, data["ddq0"].ravel() + data["Q"] @ answer,
-                                   answer])
+        def outputs(answer: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            command = np.concatenate([data["tau0"].ravel() + data["T"] @ answer, data["ddq0"].ravel() + data["Q"] @ answer])
+            return command, answer
 
         return rounding_spread(*self._qp(data), self._structure, x, outputs, samples, enough)
 

@@ -118,6 +118,8 @@ def test_bundle_is_complete_and_self_describing(built, three_levels_spec):
     tolerances = golden_tolerances("dcts")
     for v in vectors:
         assert v["determined"] == (v["rounding_spread"] <= SPREAD_FRACTION * tolerances[v["status"] == 1])
+        assert v["command_determined"] == (v["command_spread"] <= SPREAD_FRACTION * tolerances[v["status"] == 1])
+        assert v["command_spread"] <= v["rounding_spread"]
     assert manifest["golden"]["undetermined"] == [k for k, v in enumerate(vectors) if not v["determined"]]
     assert len(manifest["golden"]["undetermined"]) <= 2  # (this spec's answers are well determined)
 
@@ -171,7 +173,8 @@ def test_nomalloc_catches_a_heap_call(built, tmp_path):
 
 
 def test_golden_test_fails_on_mismatch(built, tmp_path):
-    """The replay is a real check: corrupt one golden torque and it exits non-zero."""
+    """The replay is a real check: corrupt one golden torque and it exits non-zero; it compares what
+    a vector's data determine (golden_compared)."""
     out, _ = built
     copy = tmp_path / "bundle"
     # with its build folder (mtimes kept): make recompiles only the corrupted golden file
@@ -180,17 +183,33 @@ def test_golden_test_fails_on_mismatch(built, tmp_path):
     text = golden.read_text()
     start = text.index("three_levels_golden_tau[")
     first = re.compile(r"\{(-?0x[0-9a-f.p+-]+)").search(text, start)
+    original_tau = first.group(1)
     text = text[: first.start(1)] + "0x1.0p+5" + text[first.end(1):]
     golden.write_text(text)
     done = subprocess.run(["make", "-s", "check"], cwd=copy, capture_output=True, text=True)
     assert done.returncode != 0 and "mismatch" in done.stdout
     # a vector whose answer its data do not determine is compared on status and torque limits only
-    flags = re.compile(r"three_levels_golden_determined\[\d+\] = \{(\d)").search(text)
-    undetermined = json.loads((out / "manifest.json").read_text())["golden"]["undetermined"]
+    flags = re.compile(r"three_levels_golden_compared\[\d+\] = \{(\d)").search(text)
+    assert flags.group(1) == "2"
+    manifest = json.loads((out / "manifest.json").read_text())["golden"]
+    undetermined = set(manifest["undetermined"]) - set(manifest["compared_on_command"])
     golden.write_text(text[: flags.start(1)] + "0" + text[flags.end(1):])
     done = subprocess.run(["make", "-s", "check"], cwd=copy, capture_output=True, text=True)
     assert done.returncode == 0, done.stdout
-    assert f"{len(set(undetermined) | {0})} not determined by their data" in done.stdout
+    assert f"{len(undetermined | {0})} not determined by their data" in done.stdout
+    # one whose QP solution alone its data do not determine: its torque is still compared, its x not
+    golden.write_text(text[: flags.start(1)] + "1" + text[flags.end(1):])
+    done = subprocess.run(["make", "-s", "check"], cwd=copy, capture_output=True, text=True)
+    assert done.returncode != 0 and "mismatch: vector 0" in done.stdout, done.stdout
+    text = text[: flags.start(1)] + "1" + text[flags.end(1):]
+    start = text.index("three_levels_golden_tau[")
+    first = re.compile(r"\{(-?0x[0-9a-f.p+-]+)").search(text, start)
+    text = text[: first.start(1)] + original_tau + text[first.end(1):]
+    start = text.index("three_levels_golden_x[")
+    first = re.compile(r"\{(-?0x[0-9a-f.p+-]+)").search(text, start)
+    golden.write_text(text[: first.start(1)] + "0x1.0p+5" + text[first.end(1):])
+    done = subprocess.run(["make", "-s", "check"], cwd=copy, capture_output=True, text=True)
+    assert done.returncode == 0, done.stdout
 
 
 def test_c_agrees_with_python_on_1000_states(built, three_levels_spec):
@@ -493,13 +512,11 @@ def test_cache_builds_once_then_loads(tmp_path):
     library = entry / "libminimal.so"
     built_at = library.stat().st_mtime_ns
     assert json.loads((entry / KEY_FILE).read_text())["digest"] == key.digest
-    start = time.perf_counter()
     with cache.load(MINIMAL) as second:  # a file name works too
-        elapsed = time.perf_counter() - start
         assert cache.last_hit is True and second.directory == entry
         for s, tau in zip(states, expected):
             np.testing.assert_array_equal(second.step(*s.as_tuple()[:3]).tau, tau)
-    assert library.stat().st_mtime_ns == built_at and elapsed < 2.0  # loaded, not rebuilt
+    assert library.stat().st_mtime_ns == built_at  # loaded, not rebuilt
     assert cache.entries() == [entry]
     assert not [p for p in cache.directory.iterdir() if p.name.startswith((".tmp-", ".trash-"))]
 
@@ -850,6 +867,38 @@ def test_unseen_robots_pass_their_golden_test(name, tmp_path):
     spec.write_text(UNSEEN_ROBOTS[name].format(urdf=example_robot_data_dir()))
     report = compile_bundle(spec, tmp_path / "bundle")  # a failed golden test raises CodegenError
     assert report.manifest["built"] and "126 golden vectors" in report.manifest["host"]["test_summary"]
+
+
+@EXTENDED
+def test_a_level_no_free_direction_moves_is_compared_on_its_torques(tmp_path):
+    """xArm7 (first tried from outside), four levels whose third (the elbow's height) has no free
+    direction at most states: its variables are arbitrary, so a fifth of the golden vectors have
+    an undetermined QP solution; their torques and accelerations are determined and compared."""
+    from dcts_spec.robot.builtin import example_robot_data_dir
+
+    spec = tmp_path / "xarm.yaml"
+    spec.write_text(f"""version: 1
+name: xarm_four_levels
+robot:
+  urdf: {example_robot_data_dir()}/xarm_description/urdf/xarm7.urdf
+limits:
+  joint_acceleration: {{max: 30}}
+  cartesian:
+    - {{frame: link_eef, axis: z, min: 0.20}}
+tasks:
+  - {{name: tool, type: position, frame: link_eef, priority: 1, gains: {{kp: 100, kd: 20}},
+     reference: {{position: [0.45, 0.1, 0.05]}}}}
+  - {{name: tool_axis, type: orientation, frame: link_eef, axes: [rx, ry], priority: 2,
+     gains: {{kp: 80, kd: 18}}, reference: {{rpy: [3.14159, 0, 0]}}}}
+  - {{name: elbow, type: position, frame: link4, axes: [z], priority: 3, gains: {{kp: 50, kd: 14}},
+     reference: {{position: [0, 0, 0.6]}}}}
+  - {{name: posture, type: joint, priority: 4, gains: {{kp: 10, kd: 6}},
+     reference: {{q: [0, 0.3, 0, 1.2, 0, 0.9, 0]}}}}
+""")
+    report = compile_bundle(spec, tmp_path / "bundle")  # a failed golden test raises CodegenError
+    golden = report.manifest["golden"]
+    assert len(golden["compared_on_command"]) >= 5, golden
+    assert f"{len(golden['compared_on_command'])} compared on tau and ddq only" in report.manifest["host"]["test_summary"]
 
 
 def test_a_two_joint_robot_builds_and_passes_its_golden_test(tmp_path):

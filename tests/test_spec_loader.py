@@ -146,13 +146,16 @@ def test_read_yaml_file(tmp_path: Path) -> None:
 
 # --- input that must not hang, crash or flood: one located error, fast ---------------------------------
 
+HANG_SECONDS = 10.0  # far below a hang, far above the ~0.1 s these take on a loaded machine
+
 
 def _one_error(text: str) -> Diagnostic:
-    """The single error of reading `text`, which must come within a second."""
+    """The single error of reading `text`, which must come without a hang (an alias bomb expanded
+    takes minutes; the bound is loose, so that a loaded CI machine does not fail it)."""
     start = time.perf_counter()
     with pytest.raises(SpecError) as caught:
         load_spec_text(text, "f.yaml")
-    assert time.perf_counter() - start < 1.0, "bad input must be refused fast"
+    assert time.perf_counter() - start < HANG_SECONDS, "bad input must be refused, not expanded"
     (d,) = caught.value.errors
     assert d.file == "f.yaml" and d.line is not None and d.column is not None
     return d
@@ -229,7 +232,7 @@ def test_big_and_endless_files_are_refused(tmp_path: Path) -> None:
         start = time.perf_counter()
         with pytest.raises(SpecError) as caught:
             read_yaml_file(path)
-        assert time.perf_counter() - start < 1.0
+        assert time.perf_counter() - start < HANG_SECONDS  # (/dev/zero: refused, not read to the end)
         (d,) = caught.value.diagnostics
         assert (d.line, d.column) == (1, 1) and "larger than 1000 kB" in d.message
 

@@ -252,12 +252,14 @@ def generate_casadi(controller: Controller, name: str, directory: Path) -> dict[
 GOLDEN_TOLERANCES = {"qp_mt": (1e-5, 1e-3), "qp_md": (1e-5, 1e-3), "dcts": (1e-6, 1e-3)}
 CLOSED_FORM_TOLERANCE = (1e-8, 1e-8)
 # Whether a vector's answer is determined by its data (solve/sensitivity.py): this many solves on
-# rounding-size changes of the QP data, and it is if none moves τ, q̈ or x by more than this
-# fraction of the vector's tolerance. (The spread a few samples find is a lower bound: of G1's 29
-# joints' 126 vectors, 4 samples flagged 11, 12 samples 17–20, 24 samples 3 more; rounding moves
-# such an answer in a few of the samples, and not at all in the others.)
+# rounding-size changes of the QP data, and its command (τ, q̈) or its QP solution (x) is if none
+# moves it by more than this fraction of the vector's tolerance. (The spread a few samples find
+# is a lower bound: of G1's 29 joints' 126 vectors, 4 samples flagged 11, 12 samples 17–20, 24
+# samples 3 more; rounding moves such an answer in a few of the samples, and not at all in the
+# others.)
 SPREAD_SAMPLES = 12
 SPREAD_FRACTION = 0.1
+COMPARED_STATUS, COMPARED_COMMAND, COMPARED_ALL = 0, 1, 2  # Golden.compared
 
 
 def golden_tolerances(formulation: str) -> tuple[float, float]:
@@ -274,11 +276,18 @@ class Golden:
     x: np.ndarray  # padded to nx
     nx: np.ndarray  # valid entries of x per vector
     status: np.ndarray
-    # per vector: how far rounding-size changes of the QP data moved the Python runtime's answer
-    # (Controller.answer_spread), and whether that is within SPREAD_FRACTION of its tolerance:
-    # the test compares the others on status and torque limits only
+    # per vector: how far rounding-size changes of the QP data moved the Python runtime's command
+    # (τ, q̈) and its QP solution (x) (Controller.answer_spread: columns 0 and 1), and what the test
+    # compares: COMPARED_ALL, COMPARED_COMMAND (where x is not determined: a level no free direction
+    # moves has arbitrary variables, the torques do not) or COMPARED_STATUS (status and torque
+    # limits only), each part where its spread is within SPREAD_FRACTION of the tolerance
     spread: np.ndarray
-    determined: np.ndarray
+    compared: np.ndarray
+
+    @property
+    def determined(self) -> np.ndarray:
+        """The vectors compared on everything."""
+        return self.compared == COMPARED_ALL
 
 
 def compute_golden(controller: Controller, states: list[State]) -> Golden:
@@ -291,7 +300,7 @@ def compute_golden(controller: Controller, states: list[State]) -> Golden:
     tau, ddq = np.zeros((count, n)), np.zeros((count, n))
     scaling, x = np.zeros((count, levels)), np.zeros((count, max(nx, 1)))
     nxs, status = np.zeros(count, dtype=int), np.zeros(count, dtype=int)
-    spread, limit = np.zeros(count), np.zeros(count)  # limit: the spread a determined answer may have
+    spread, limit = np.zeros((count, 2)), np.zeros(count)  # limit: the spread a determined answer may have
     tolerances = golden_tolerances(controller.formulation)
     for k, s in enumerate(states):
         if s.params is not None:
@@ -306,7 +315,9 @@ def compute_golden(controller: Controller, states: list[State]) -> Golden:
             spread[k] = controller.answer_spread(s.q, s.dq, s.tau_ext, ref, r.x, SPREAD_SAMPLES, limit[k])
     controller._last_q = None
     controller.reset_params()
-    return Golden(states, tau, ddq, scaling, x, nxs, status, spread, spread <= limit)
+    command, solution = (spread[:, i] <= limit for i in (0, 1))
+    compared = np.where(command & solution, COMPARED_ALL, np.where(command, COMPARED_COMMAND, COMPARED_STATUS))
+    return Golden(states, tau, ddq, scaling, x, nxs, status, spread, compared)
 
 
 def golden_sources(name: str, golden: Golden, nref_alloc: int, nparam_alloc: int) -> tuple[str, str]:
@@ -339,7 +350,9 @@ extern const double {name}_golden_scaling[{count}][{big}_NLEVELS_ALLOC];
 extern const double {name}_golden_x[{count}][{big}_NX_ALLOC];
 extern const int {name}_golden_nx[{count}];
 extern const int {name}_golden_status[{count}];
-extern const int {name}_golden_determined[{count}]; /* 0: status and torque limits compared only */
+/* what each vector is compared on: 2 everything; 1 tau and ddq (its QP solution and scalings are not
+ * determined by its data); 0 status and torque limits only */
+extern const int {name}_golden_compared[{count}];
 
 #endif
 """
@@ -378,9 +391,13 @@ const double {name}_golden_x[{count}][{big}_NX_ALLOC] = {{
 }};
 const int {name}_golden_nx[{count}] = {{{", ".join(str(int(v)) for v in golden.nx)}}};
 const int {name}_golden_status[{count}] = {{{", ".join(str(int(v)) for v in golden.status)}}};
-const int {name}_golden_determined[{count}] = {{{", ".join(str(int(v)) for v in golden.determined)}}};
+const int {name}_golden_compared[{count}] = {{{", ".join(str(int(v)) for v in golden.compared)}}};
 """
     return header, source
+
+
+def _finite_or_inf(value: float) -> float | str:
+    return float(value) if np.isfinite(value) else "inf"
 
 
 def golden_json(golden: Golden) -> dict:
@@ -391,9 +408,10 @@ def golden_json(golden: Golden) -> dict:
 
     return {
         "note": ("inputs and the Python runtime's outputs, in the order they were run; rounding_spread: how far "
-                 "rounding-size changes of the QP data moved the answer (relative), determined: whether that "
-                 "is within a tenth of the test's tolerance (if not, the test compares status and torque "
-                 "limits only)"),
+                 "rounding-size changes of the QP data moved the answer (tau, ddq and x; relative), "
+                 "command_spread: tau and ddq alone; determined: whether the answer's spread is within a tenth "
+                 "of the test's tolerance, command_determined: the command's (the test compares what is "
+                 "determined, else status and torque limits only)"),
         "vectors": [
             {
                 "kind": s.kind,
@@ -401,8 +419,10 @@ def golden_json(golden: Golden) -> dict:
                 **({"params": vec(s.params)} if s.params is not None else {}),
                 "tau": vec(golden.tau[k]), "ddq": vec(golden.ddq[k]), "scaling": vec(golden.scaling[k]),
                 "x": vec(golden.x[k, : golden.nx[k]]), "status": int(golden.status[k]),
-                "rounding_spread": float(golden.spread[k]) if np.isfinite(golden.spread[k]) else "inf",
-                "determined": bool(golden.determined[k]),
+                "rounding_spread": _finite_or_inf(golden.spread[k].max()),
+                "command_spread": _finite_or_inf(golden.spread[k, 0]),
+                "determined": bool(golden.compared[k] == COMPARED_ALL),
+                "command_determined": bool(golden.compared[k] >= COMPARED_COMMAND),
             }
             for k, s in enumerate(golden.states)
         ],
@@ -664,8 +684,10 @@ def generate_sources(
         "qp_data_optimization": list(qp_data_optimization(work["instructions"])),
         "casadi_work": {k: work[k] for k in ("sz_arg", "sz_res", "sz_iw", "sz_w")},
         "golden": {"count": len(states), "statuses": statuses,
-                   # vectors whose answer rounding-size changes of the data move beyond the tolerance
-                   "undetermined": [int(k) for k in np.flatnonzero(~golden.determined)]},
+                   # vectors whose answer rounding-size changes of the data move beyond the tolerance,
+                   # and of those, the ones whose command (τ, q̈) they do not: compared on it
+                   "undetermined": [int(k) for k in np.flatnonzero(~golden.determined)],
+                   "compared_on_command": [int(k) for k in np.flatnonzero(golden.compared == COMPARED_COMMAND)]},
         "daqp": {"version": DAQP_VERSION, "sources": "daqp/"} if nx else None,
         "library": f"lib{name}.so",
         "files": sorted([*files, f"{name}_casadi.c", f"{name}_casadi.h", "golden.json", "manifest.json"]
