@@ -105,20 +105,35 @@ def test_interrupt_ends_the_group(tmp_path: Path, monkeypatch: pytest.MonkeyPatc
     assert _wait_dead(child), f"the build's child {child} survived the interrupt"
 
 
-def test_parallel_first_downloads_of_daqp_each_get_the_complete_sources(tmp_path):
+def test_parallel_first_downloads_of_daqp_each_get_the_complete_sources(tmp_path, monkeypatch):
     # on a fresh machine pytest-xdist's workers all fetch DAQP at once; one must never compile
-    # another's half-unpacked copy
+    # another's half-unpacked copy. pip is stood in for by a copy of the real source archive's
+    # contents (the cached sources), slow enough that the two fetches overlap.
+    import tarfile
+    import types
     from concurrent.futures import ThreadPoolExecutor
 
-    from dcts_spec.codegen import daqp_sources
+    from dcts_spec.codegen import build, daqp_sources
 
-    with ThreadPoolExecutor(2) as pool:
-        futures = [pool.submit(daqp_sources, tmp_path) for _ in range(2)]
     try:
-        found = {future.result() for future in futures}
+        cached = daqp_sources()
     except CodegenError as error:
         pytest.skip(f"DAQP sources unavailable: {error}")
-    assert found == {tmp_path / "daqp" / f"daqp-{DAQP_VERSION}" / "csrc"}
+    archive = tmp_path / f"daqp-{DAQP_VERSION}.tar.gz"
+    with tarfile.open(archive, "w:gz") as tar:
+        tar.add(cached, arcname=f"daqp-{DAQP_VERSION}/csrc")
+
+    def pip_download(command, **_):
+        time.sleep(0.3)
+        (Path(command[command.index("-d") + 1]) / archive.name).write_bytes(archive.read_bytes())
+        return types.SimpleNamespace(returncode=0, stdout="", stderr="")
+
+    monkeypatch.setattr(build, "subprocess", types.SimpleNamespace(run=pip_download))
+    cache = tmp_path / "cache"
+    with ThreadPoolExecutor(2) as pool:
+        futures = [pool.submit(daqp_sources, cache) for _ in range(2)]
+    found = {future.result() for future in futures}
+    assert found == {cache / "daqp" / f"daqp-{DAQP_VERSION}" / "csrc"}
     csrc = found.pop()
-    assert {p.name for p in (csrc / "src").iterdir()} >= {"api.c", "daqp.c", "factorization.c", "auxiliary.c"}
-    assert [p.name for p in (tmp_path / "daqp").iterdir()] == [f"daqp-{DAQP_VERSION}"]  # no private folder left
+    assert sorted(p.name for p in (csrc / "src").iterdir()) == sorted(p.name for p in (cached / "src").iterdir())
+    assert [p.name for p in (cache / "daqp").iterdir()] == [f"daqp-{DAQP_VERSION}"]  # no private folder left
