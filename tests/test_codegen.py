@@ -172,6 +172,16 @@ def test_nomalloc_catches_a_heap_call(built, tmp_path):
     assert done.returncode != 0 and "FAIL: malloc called" in done.stdout, done.stdout + done.stderr
 
 
+def _with_entry(text: str, array: str, k: int, value: str) -> str:
+    """`text` (a golden .c file) with vector k's entry of the C array `array` replaced by `value`:
+    the first element of its row (a table of hexadecimal literals), or its flag."""
+    start = text.index("= {", text.index(f"{array}[")) + len("= {")
+    table = text[start:].lstrip().startswith("{")
+    entries = re.compile(r"\{(-?0x[0-9a-f.p+-]+)" if table else r"(-?\d+)").finditer(text, start)
+    found = next(entry for i, entry in enumerate(entries) if i == k)
+    return text[: found.start(1)] + value + text[found.end(1):]
+
+
 def test_golden_test_fails_on_mismatch(built, tmp_path):
     """The replay is a real check: corrupt one golden torque and it exits non-zero; it compares what
     a vector's data determine (golden_compared)."""
@@ -180,35 +190,31 @@ def test_golden_test_fails_on_mismatch(built, tmp_path):
     # with its build folder (mtimes kept): make recompiles only the corrupted golden file
     shutil.copytree(out, copy, ignore=shutil.ignore_patterns("*_test", "*_test_heap"))
     golden = copy / "three_levels_golden.c"
-    text = golden.read_text()
-    start = text.index("three_levels_golden_tau[")
-    first = re.compile(r"\{(-?0x[0-9a-f.p+-]+)").search(text, start)
-    original_tau = first.group(1)
-    text = text[: first.start(1)] + "0x1.0p+5" + text[first.end(1):]
-    golden.write_text(text)
-    done = subprocess.run(["make", "-s", "check"], cwd=copy, capture_output=True, text=True)
+    pristine = golden.read_text()
+
+    def check(text: str) -> subprocess.CompletedProcess:
+        golden.write_text(text)
+        return subprocess.run(["make", "-s", "check"], cwd=copy, capture_output=True, text=True)
+
+    corrupt = _with_entry(pristine, "three_levels_golden_tau", 0, "0x1.0p+5")
+    done = check(corrupt)
     assert done.returncode != 0 and "mismatch" in done.stdout
     # a vector whose answer its data do not determine is compared on status and torque limits only
-    flags = re.compile(r"three_levels_golden_compared\[\d+\] = \{(\d)").search(text)
-    assert flags.group(1) == "2"
+    assert re.compile(r"three_levels_golden_compared\[\d+\] = \{(\d)").search(pristine).group(1) == "2"
     manifest = json.loads((out / "manifest.json").read_text())["golden"]
     undetermined = set(manifest["undetermined"]) - set(manifest["compared_on_command"])
-    golden.write_text(text[: flags.start(1)] + "0" + text[flags.end(1):])
-    done = subprocess.run(["make", "-s", "check"], cwd=copy, capture_output=True, text=True)
+    done = check(_with_entry(corrupt, "three_levels_golden_compared", 0, "0"))
     assert done.returncode == 0, done.stdout
     assert f"{len(undetermined | {0})} not determined by their data" in done.stdout
     # one whose QP solution alone its data do not determine: its torque is still compared, its x not
-    golden.write_text(text[: flags.start(1)] + "1" + text[flags.end(1):])
-    done = subprocess.run(["make", "-s", "check"], cwd=copy, capture_output=True, text=True)
+    done = check(_with_entry(corrupt, "three_levels_golden_compared", 0, "1"))
     assert done.returncode != 0 and "mismatch: vector 0" in done.stdout, done.stdout
-    text = text[: flags.start(1)] + "1" + text[flags.end(1):]
-    start = text.index("three_levels_golden_tau[")
-    first = re.compile(r"\{(-?0x[0-9a-f.p+-]+)").search(text, start)
-    text = text[: first.start(1)] + original_tau + text[first.end(1):]
-    start = text.index("three_levels_golden_x[")
-    first = re.compile(r"\{(-?0x[0-9a-f.p+-]+)").search(text, start)
-    golden.write_text(text[: first.start(1)] + "0x1.0p+5" + text[first.end(1):])
-    done = subprocess.run(["make", "-s", "check"], cwd=copy, capture_output=True, text=True)
+    vectors = json.loads((out / "golden.json").read_text())["vectors"]
+    k = next(k for k, v in enumerate(vectors) if v["status"] == 0 and v["determined"] and v["x"])
+    wrong_x = _with_entry(pristine, "three_levels_golden_x", k, "0x1.0p+5")
+    done = check(wrong_x)
+    assert done.returncode != 0 and f"mismatch: vector {k} x[0]" in done.stdout, done.stdout
+    done = check(_with_entry(wrong_x, "three_levels_golden_compared", k, "1"))
     assert done.returncode == 0, done.stdout
 
 
