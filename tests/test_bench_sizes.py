@@ -31,6 +31,17 @@ def test_specs_validate_with_the_named_joints(model: bench_sizes.Model, tmp_path
     assert levels == [[f"{frame}_pose" for frame in model.arm_frames], ["posture"]]
 
 
+def test_the_chain_spec_validates_with_every_joint_and_away_from_its_singularity(tmp_path: Path) -> None:
+    """The generated serial chain (the worst case: every task sees every joint) validates, and its
+    tip's pose task has full rank at the start (straight up, the chain would be singular)."""
+    urdf, spec = tmp_path / "chain.urdf", tmp_path / "chain.yaml"
+    urdf.write_text(bench_sizes.chain_urdf(bench_sizes.CHAIN_JOINTS))
+    spec.write_text(bench_sizes.chain_spec(bench_sizes.CHAIN_JOINTS, urdf))
+    report = validate_file(spec)
+    assert report.robot.nv == bench_sizes.CHAIN_JOINTS and not report.diagnostics
+    assert [(lv.dimension, lv.rank) for lv in report.levels] == [(6, 6), (32, 26)]
+
+
 def test_table_row() -> None:
     row = {"model": "m", "dof": 7, "qp_data_operations": 8300, "c_source_bytes": 190_000, "text_bytes": 146_000,
            "compile_s": 4.2, "compile_peak_rss_bytes": 2.4e8, "step_median_us": 3.04, "step_p99_us": 6.2,

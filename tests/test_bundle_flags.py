@@ -54,9 +54,9 @@ def test_bench_harness_builds_like_the_makefile(tmp_path: Path, monkeypatch: pyt
     assert not any(word.endswith(("arm.c", "arm_casadi.c")) for word in command)  # no second build of the sources
 
 
-def _compile_commands(bundle: Path, *variables: str) -> dict[str, list[str]]:
+def _compile_commands(bundle: Path, *variables: str, target: str = "lib") -> dict[str, list[str]]:
     """The compiler command make would run for each of the controller's sources (dry run)."""
-    done = subprocess.run(["make", "-n", "-B", "lib", *variables], cwd=bundle, capture_output=True, text=True)
+    done = subprocess.run(["make", "-n", "-B", target, *variables], cwd=bundle, capture_output=True, text=True)
     assert done.returncode == 0, done.stderr
     commands = {}
     for line in done.stdout.splitlines():
@@ -84,6 +84,17 @@ def test_the_qp_data_get_o1_from_a_size_on(sources: Path) -> None:
     assert all("-O3" in words and "-O1" not in words for words in commands.values())
 
 
+def test_the_firmware_compiles_the_qp_data_as_the_host_does(sources: Path) -> None:
+    """The Cortex-M7 build gives the QP data the same size-chosen flags (a 32-joint chain's QP data
+    at the firmware's -O2 took arm-none-eabi-gcc more than 8 minutes and 1.5 GB); the last -O wins."""
+    makefile = (sources / "Makefile").read_text()
+    assert re.search(r"^ARM_QP_DATA_OPT \?= (.*)$", makefile, re.M).group(1).split() == list(HOST_OPTIMIZATION)
+    commands = _compile_commands(sources, "ARM_QP_DATA_OPT=-O0", target="firmware")
+    optimization = {source: [w for w in words if w.startswith("-O")][-1] for source, words in commands.items()}
+    assert optimization["minimal_casadi.c"] == "-O0"
+    assert optimization["minimal.c"] == optimization["minimal_test.c"] == "-O2"
+
+
 def test_outputs_are_checked_once_not_at_every_store(sources: Path) -> None:
     """The generated functions check their output pointers at their start (the wrapper passes them
     all): no `if (res[i]!=0)` before each of the thousands of stores (codegen/bundle.py,
@@ -93,15 +104,47 @@ def test_outputs_are_checked_once_not_at_every_store(sources: Path) -> None:
     assert re.search(r"^  res\[0\]\[0\]=a\d+;$", text, re.M)
 
 
-def test_qp_data_too_large_for_a_compiler_are_refused_before_any_c(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+@pytest.mark.parametrize("formulation", ["dcts", "projector"])
+def test_qp_data_too_large_for_a_compiler_are_refused_before_any_c(
+        formulation: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """QP data beyond MAX_QP_DATA_OPERATIONS (the projector baseline on a 21-joint human model:
-    ~3 M operations, 74 MB of C, more memory than gcc had) are refused before any C is written,
-    with what to do instead; nothing is left at the output path."""
+    ~3 M operations, 74 MB of C, more memory than gcc had; dcts on a 48-joint serial chain: 620 k)
+    are refused before any C is written, with what to do instead (dcts, whose QP data are the
+    smallest, only for another formulation); nothing is left at the output path."""
     monkeypatch.setattr(bundle_module, "MAX_QP_DATA_OPERATIONS", 100)
     out = tmp_path / "bundle"
     with pytest.raises(CodegenError) as refused:
-        compile_bundle(MINIMAL, out, build=False)
+        compile_bundle(MINIMAL, out, formulation=formulation, build=False)
     message = str(refused.value)
     assert "operations for its QP data" in message and "more than the 100" in message
-    assert "--formulation dcts" in message and "--runtime python" in message
+    assert ("--formulation dcts" in message) == (formulation != "dcts") and "--runtime python" in message
     assert not out.exists()
+
+
+def test_an_image_beyond_the_flash_is_reported_with_the_flash_it_needs(
+        sources: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A firmware image larger than the 4 MB it is linked for (a 32-joint chain's) is a result, not a
+    build failure: FirmwareTooLarge says how much flash it needs (the linker's largest overflow)."""
+    from dcts_spec.codegen import build as build_module
+
+    linker = ("ld: firmware/m_fw.elf section `.text' will not fit in region `FLASH'\n"
+              "ld: region `FLASH' overflowed by 7347384 bytes\n"
+              "ld: region `FLASH' overflowed by 7576976 bytes\ncollect2: error: ld returned 1 exit status")
+
+    def failing_make(*args, **kwargs):
+        raise CodegenError(f"firmware build failed (exit code 2):\n{linker}")
+
+    monkeypatch.setattr(build_module.shutil, "which", lambda name: f"/usr/bin/{name}")
+    monkeypatch.setattr(build_module, "make", failing_make)
+    with pytest.raises(build_module.FirmwareTooLarge) as too_large:
+        build_module.build_firmware(sources, {"name": "minimal"}, qemu=False)
+    assert too_large.value.flash_bytes == 4 * 2**20 + 7576976
+    assert "at least 11.8 MB of flash" in str(too_large.value)
+
+    def other_failure(*args, **kwargs):
+        raise CodegenError("firmware build failed (exit code 2):\nerror: unknown type name")
+
+    monkeypatch.setattr(build_module, "make", other_failure)
+    with pytest.raises(CodegenError) as failed:
+        build_module.build_firmware(sources, {"name": "minimal"}, qemu=False)
+    assert not isinstance(failed.value, build_module.FirmwareTooLarge)

@@ -37,6 +37,8 @@ CACHE_DIR = Path(os.environ.get("DCTS_CACHE", Path.home() / ".cache" / "dcts"))
 # heap counting (the Cortex-M7 test on qemu), the heap calls of init and of the steps.
 GOLDEN_SUMMARY = "golden vectors"
 HEAP_LINE = re.compile(r"heap: init (\d+) calls (\d+) bytes; steps (\d+) calls")
+FLASH_OVERFLOW = re.compile(r"region `FLASH' overflowed by (\d+) bytes")
+FIRMWARE_FLASH_BYTES = 4 * 1024 * 1024  # the flash the image is linked for (firmware/mps2_an500.ld)
 
 
 # -- toolchain -------------------------------------------------------------------------------------
@@ -329,7 +331,13 @@ def build_firmware(directory: Path, manifest: dict, qemu: bool = True, timeout: 
         raise CodegenError("arm-none-eabi-gcc not found: install gcc-arm-none-eabi and libnewlib-arm-none-eabi")
     phase("cross-compiling for cortex-m7")
     variables: dict[str, str] = {}
-    make(directory, ["firmware"], "firmware build", variables, timeout)
+    try:
+        make(directory, ["firmware"], "firmware build", variables, timeout)
+    except CodegenError as error:
+        overflows = [int(n) for n in FLASH_OVERFLOW.findall(str(error))]
+        if not overflows:
+            raise
+        raise FirmwareTooLarge(FIRMWARE_FLASH_BYTES + max(overflows)) from None
     name = manifest["name"]
     sections = _arm_sections(directory / "firmware" / f"{name}_fw.size")
     text, data, bss = sections.get("text", 0), sections.get("data", 0), sections.get("bss", 0)
@@ -352,6 +360,17 @@ def build_firmware(directory: Path, manifest: dict, qemu: bool = True, timeout: 
             result["step_heap_calls"] = int(heap.group(3))
         result["qemu"] = f"{summary} — PASS" if "PASS" in output else summary
     return result
+
+
+class FirmwareTooLarge(CodegenError):
+    """The Cortex-M7 image does not fit the flash it is linked for."""
+
+    def __init__(self, flash_bytes: int):
+        self.flash_bytes = flash_bytes  # what the image needs, at least (the linker's overflow)
+        super().__init__(
+            f"the Cortex-M7 image needs at least {flash_bytes / 1e6:.1f} MB of flash, more than the "
+            f"{FIRMWARE_FLASH_BYTES / 2**20:.0f} MB of the board it is linked for (qemu's mps2-an500; a "
+            "microcontroller has 64 kB to 2 MB): fewer joints (robot.locked_joints) or tasks")
 
 
 def _arm_sections(size_file: Path) -> dict[str, int]:

@@ -220,10 +220,11 @@ def generate_casadi(controller: Controller, name: str, directory: Path) -> dict[
     data = qp_data_function(controller, name)
     operations = data.n_instructions()
     if operations > MAX_QP_DATA_OPERATIONS:
+        other = "" if controller.formulation == "dcts" else "use --formulation dcts, "  # (the smallest QP data)
         raise CodegenError(
             f"the {controller.formulation} control law of this spec takes {operations:,} operations for its QP data "
             f"({controller.n} joints), more than the {MAX_QP_DATA_OPERATIONS:,} a C compiler can take in one function "
-            f"(~12 kB of memory per operation, minutes of time); use --formulation dcts, fewer joints "
+            f"(~12 kB of memory per operation, minutes of time); {other}fewer joints "
             f"(robot.locked_joints) or fewer tasks, or run this formulation with the Python runtime "
             f"(dcts simulate --runtime python)")
     fallback = controller.fallback_function.expand(f"{name}_fallback")
