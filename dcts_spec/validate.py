@@ -175,7 +175,9 @@ def _check_cartesian_bounds(spec: Spec, robot: Robot, q0: np.ndarray) -> list[Di
             if frame == b.frame and not b.c_min <= target <= b.c_max:
                 diags.append(spec.source.diagnostic(
                     at, f"{what} puts {b.frame}.{b.label} at {target:.4g} m, outside its bound {text} "
-                        f"(limits.cartesian[{i}]): the task will stop at the bound", "warning"))
+                        f"(limits.cartesian[{i}]): at the bound its scaling falls to 0 (direction kept), so it stops "
+                        f"accelerating {b.frame}, and motion along the bound is no longer damped; put the target "
+                        f"inside", "warning"))
     return diags
 
 

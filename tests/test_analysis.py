@@ -121,6 +121,9 @@ def test_summary_definitions(case) -> None:
     log.q[5, 2] = robot.limits.q_min[2] - 0.25
     log.dq[7, 4] = -1.5  # v_max = 1
     log.tau[9, 0] = 52.0  # τ_max = 50
+    log.tau[20, 3] = 4.0  # a step of 4 Nm twice, below 10 % of 50 Nm
+    log.ddq_commanded = np.zeros_like(log.ddq_commanded)
+    log.ddq_commanded[15, 6] = -321.0
     log.scaling[11] = [1.0, 0.4, 0.0]
     log.status[[12, 13]] = [-2, 1]
     log.wall_time = 0.04
@@ -130,6 +133,10 @@ def test_summary_definitions(case) -> None:
     assert summary["max_joint_velocity_violation"] == pytest.approx(0.5)
     assert summary["max_joint_velocity_violation_ratio"] == pytest.approx(0.5)
     assert summary["max_torque_violation"] == pytest.approx(2.0)
+    assert summary["max_torque_jump"] == pytest.approx(52.0) and summary["max_torque_jump_ratio"] == pytest.approx(1.04)
+    assert summary["torque_jump_steps"] == 2  # up at 9 and down at 10; not the 4 Nm ones
+    assert summary["max_commanded_acceleration"] == pytest.approx(321.0)
+    assert summary["joint_acceleration_limits"] is bool(np.isfinite(robot.limits.a_max).any())
     assert summary["solver_failures"] == 1 and summary["limits_relaxed"] == 1
     assert summary["min_scaling"] == 0.0
     assert summary["realtime_factor"] == pytest.approx(0.08 / 0.04)
@@ -282,6 +289,14 @@ def test_printed_summary_carries_units(case) -> None:
     assert f"reach {s['task_rms_error']['reach']:.3g} m (" in text
     assert f"rest [damping, velocity] {s['task_rms_error']['rest']:.3g} rad/s" in text
     assert f"position {s['max_joint_position_violation']:.3g} rad," in text
+    assert (f"smoothness torque steps between periods up to {s['max_torque_jump']:.3g} Nm "
+            f"({100 * s['max_torque_jump_ratio']:.3g}% of its limit; {s['torque_jump_steps']} above 10%)") in text
+    # the hint where it helps: jumps, and no acceleration limits to bound them
+    s.update(torque_jump_steps=3, joint_acceleration_limits=False)
+    assert "3 above 10%), commanded accelerations up to" in describe(run)
+    assert "(no limits.joint_acceleration: the velocity limits alone allow 2 q̇_max/T a step)" in describe(run)
+    s.update(joint_acceleration_limits=True)
+    assert "no limits.joint_acceleration" not in describe(run)
     # The relaxed bound reads as validate words it: the same helper, the same text.
     assert s["relaxed_bounds"]["cartesian:tool.z"] == {"bound": "0.3 m ≤ tool.z", "steps": 3,
                                                       "first": pytest.approx(0.01), "last": pytest.approx(0.018)}

@@ -5,6 +5,11 @@ Definitions (N samples t_k = k T; violations are 0 when a limit holds or does no
 - max_joint_velocity_violation = max_{k,j} max(0, |q̇_j| − q̇_max,j), rad/s; `_ratio`: over q̇_max,j
 - max_torque_violation = max_{k,j} max(0, |τ_j| − τ_max,j), Nm (τ as applied)
 - max_cartesian_violation = max over bounds and samples of the distance outside [c_min, c_max], m
+- max_torque_jump = max_{k,j} |τ_j,k − τ_j,k−1|, Nm; `_ratio`: over τ_max,j; torque_jump_steps =
+  #{k: |τ_j,k − τ_j,k−1| > TORQUE_JUMP_FRACTION τ_max,j for some j}: step-to-step chatter (a push or
+  a saturation can cause some); max_commanded_acceleration = max_{k,j} |q̈_cmd,j,k|, rad/s², and
+  joint_acceleration_limits: whether the spec bounds it (without, the velocity limits alone allow
+  up to 2 q̇_max/T a step)
 - solver_failures = #{k: status_k < 0}; limits_relaxed = #{k: status_k = 1}; relaxed_bounds: for
   each joint/Cartesian bound that gave way (keyed by its row name), the bound as validate words it,
   its number of steps and the first and last time
@@ -53,6 +58,10 @@ from ..symbolic import SymbolicRobot
 from .series import TimeSeries
 from .units import FIXED_UNITS, joints_unit, per, torque_unit
 
+# A torque step between consecutive periods above this fraction of the joint's limit counts as a jump
+# (the continuity check: no jump > 10 % of τ_max between states 1e-4 apart).
+TORQUE_JUMP_FRACTION = 0.1
+
 # The headline metrics: numbers (or per-task numbers) in every summary, finite for a completed run.
 SUMMARY_KEYS = (
     "max_joint_position_violation",
@@ -78,6 +87,7 @@ def summarize(log: SimulationLog, series: TimeSeries, robot: Robot, priorities: 
     acceleration_errors = {str(p): _mean_norm(series.acceleration_errors[p]) for p in priorities}
     waypoints = log.waypoint_times
     disturbance = log.tau_ext_true + series.payload_torque
+    torque_jump = np.abs(np.diff(log.tau, axis=0))
     summary: dict[str, Any] = {
         "duration": log.duration,
         "steps": log.steps,
@@ -88,6 +98,11 @@ def summarize(log: SimulationLog, series: TimeSeries, robot: Robot, priorities: 
         "max_joint_velocity_violation_ratio": _peak(velocity_excess / lim.v_max),
         "max_torque_violation": _peak(_excess(np.abs(log.tau), lim.tau_max)),
         "max_cartesian_violation": _cartesian_violation(series, robot),
+        "max_torque_jump": _peak(torque_jump),
+        "max_torque_jump_ratio": _peak(torque_jump / lim.tau_max),
+        "torque_jump_steps": int(np.count_nonzero((torque_jump > TORQUE_JUMP_FRACTION * lim.tau_max).any(axis=1))),
+        "max_commanded_acceleration": _peak(np.abs(log.ddq_commanded)),
+        "joint_acceleration_limits": bool(np.isfinite(lim.a_max).any()),
         "solver_failures": int(np.count_nonzero(log.status < 0)),
         "limits_relaxed": int(np.count_nonzero(log.status == STATUS_LIMITS_RELAXED)),
         "relaxed_bounds": _relaxed_bounds(log, robot, collision),
@@ -125,6 +140,8 @@ def summary_units(summary: dict[str, Any], series: TimeSeries, robot: Robot) -> 
         "max_joint_position_violation": joint,
         "max_joint_velocity_violation": per(joint, "s"),
         "max_torque_violation": torque_unit(robot),
+        "max_torque_jump": torque_unit(robot),
+        "max_commanded_acceleration": per(joint, "s²"),
         "max_disturbance_torque": torque_unit(robot),
         "max_external_torque_estimate_error": torque_unit(robot),
         "relaxed_bounds": {"steps": "steps", "first": "s", "last": "s"},

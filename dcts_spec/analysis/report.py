@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from typing import Any
 
+from .metrics import TORQUE_JUMP_FRACTION
 from .run import RunResult
 
 
@@ -39,6 +40,12 @@ def describe(run: RunResult) -> str:
     lines.append(f"  limits     worst excess: position {q('max_joint_position_violation')}, velocity "
                  f"{q('max_joint_velocity_violation')} ({100 * s['max_joint_velocity_violation_ratio']:.3g}% "
                  f"of its limit), torque {q('max_torque_violation')}, Cartesian {q('max_cartesian_violation')}")
+    smoothness = (f"  smoothness torque steps between periods up to {q('max_torque_jump')} "
+                  f"({100 * s['max_torque_jump_ratio']:.3g}% of its limit; {s['torque_jump_steps']} above "
+                  f"{100 * TORQUE_JUMP_FRACTION:g}%), commanded accelerations up to {q('max_commanded_acceleration')}")
+    if s["torque_jump_steps"] and not s["joint_acceleration_limits"]:
+        smoothness += " (no limits.joint_acceleration: the velocity limits alone allow 2 q̇_max/T a step)"
+    lines.append(smoothness)
     lines.append(f"  solver     {s['solver_failures']} failures, {s['limits_relaxed']} steps with relaxed limits, "
                  f"min scaling {min_scaling_text(s)}")
     for r in s.get("relaxed_bounds", {}).values():
