@@ -397,15 +397,14 @@ const int {name}_golden_compared[{count}] = {{{", ".join(str(int(v)) for v in go
     return header, source
 
 
-def _finite_or_inf(value: float) -> float | str:
-    return float(value) if np.isfinite(value) else "inf"
-
-
 def golden_json(golden: Golden) -> dict:
-    """The golden vectors for people and other tools (non-finite inputs written as strings)."""
+    """The golden vectors for people and other tools (non-finite numbers written as strings)."""
+
+    def number(e) -> float | str:
+        return float(e) if np.isfinite(e) else repr(float(e))
 
     def vec(v) -> list:
-        return [float(e) if np.isfinite(e) else repr(float(e)) for e in v]
+        return [number(e) for e in v]
 
     return {
         "note": ("inputs and the Python runtime's outputs, in the order they were run; rounding_spread: how far "
@@ -420,9 +419,9 @@ def golden_json(golden: Golden) -> dict:
                 **({"params": vec(s.params)} if s.params is not None else {}),
                 "tau": vec(golden.tau[k]), "ddq": vec(golden.ddq[k]), "scaling": vec(golden.scaling[k]),
                 "x": vec(golden.x[k, : golden.nx[k]]), "status": int(golden.status[k]),
-                "rounding_spread": _finite_or_inf(golden.spread[k].max()),
-                "command_spread": _finite_or_inf(golden.spread[k, 0]),
-                "determined": bool(golden.compared[k] == COMPARED_ALL),
+                "rounding_spread": number(golden.spread[k].max()),
+                "command_spread": number(golden.spread[k, 0]),
+                "determined": bool(golden.determined[k]),
                 "command_determined": bool(golden.compared[k] >= COMPARED_COMMAND),
             }
             for k, s in enumerate(golden.states)
