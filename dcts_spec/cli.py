@@ -245,7 +245,7 @@ def simulate(
 
     if video is not None:
         choose_gl_backend()  # before MuJoCo is imported
-    from .sim.commands import RunOptions, simulate_command
+    from .sim_commands import RunOptions, simulate_command
 
     options = RunOptions(runtime=runtime, duration=duration, quiet=quiet, cache=cache)
     with _feedback(quiet):
@@ -266,7 +266,7 @@ def compare(
     cache: CacheOption = True,
 ) -> None:
     """Run the same scenario with several formulations; write a metrics table and overlay plots."""
-    from .sim.commands import RunOptions, compare_command
+    from .sim_commands import RunOptions, compare_command
 
     options = RunOptions(runtime=runtime, duration=duration, quiet=quiet, cache=cache)
     names: list[str] = formulations  # type: ignore[assignment]  # (the callback split it)

@@ -20,7 +20,7 @@ from dcts_spec.codegen import model_digest
 from dcts_spec.codegen.bundle import spec_digest
 from dcts_spec.controller import StepResult
 from dcts_spec.files import OWNED
-from dcts_spec.sim.commands import RunOptions, simulate_command
+from dcts_spec.sim_commands import RunOptions, simulate_command
 from dcts_spec.sim.mismatch import scaled_robot
 from dcts_spec.sim.mujoco_model import mass_matrix
 from dcts_spec.sim.runner import Simulation, prepare_simulation
@@ -390,7 +390,7 @@ def test_no_cache_option_builds_in_a_temporary_directory(tmp_path: Path, monkeyp
         calls.append((runtime, work_dir, cache))
         raise RuntimeUnavailable("stop here")
 
-    monkeypatch.setattr("dcts_spec.sim.commands.prepare_simulation", prepare)
+    monkeypatch.setattr("dcts_spec.sim_commands.prepare_simulation", prepare)
     spec = tmp_path / "s.yaml"
     spec.write_text(spec_text("  duration: 0.02\n"))
     runner = CliRunner()

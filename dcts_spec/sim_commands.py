@@ -15,19 +15,19 @@ from pathlib import Path
 
 import typer
 
-from ..analysis.compare import markdown_table, write_comparison
-from ..analysis.outputs import atomic_directory, earlier_output, write_run
-from ..analysis.report import describe
-from ..files import OutputFolderError, check_writable
-from ..analysis.run import RunResult, analyze
-from ..formulations import FORMULATIONS
-from ..phases import building_controller, phase
-from ..spec import Spec, SpecError, load_spec
-from .progress import ProgressBar
-from .runner import Hook, Simulation, prepare_simulation
-from .runtime import RUNTIMES, RuntimeUnavailable
-from .video import VideoRecorder, VideoUnavailable
-from .viewer import LiveViewer, ViewerUnavailable
+from .analysis.compare import markdown_table, write_comparison
+from .analysis.outputs import atomic_directory, earlier_output, write_run
+from .analysis.report import describe
+from .analysis.run import RunResult, analyze
+from .files import OutputFolderError, check_writable
+from .formulations import FORMULATIONS
+from .phases import building_controller, phase
+from .sim.progress import ProgressBar
+from .sim.runner import Hook, Simulation, prepare_simulation
+from .sim.runtime import RUNTIMES, RuntimeUnavailable
+from .sim.video import VideoRecorder, VideoUnavailable
+from .sim.viewer import LiveViewer, ViewerUnavailable
+from .spec import Spec, SpecError, load_spec
 
 RESULTS_DIR = Path("runs")
 
