@@ -577,12 +577,12 @@ def _highs_scale_then_final(cascade, lbx, ubx) -> np.ndarray:
 
 
 @pytest.mark.parametrize("robot", ROBOTS)
-def test_lowest_level_scaled_and_finished_in_one_checked_qp(robot, monkeypatch):
-    """Where only the lowest level gives way, one QP with its scaling weighted (an exact penalty)
-    and one proximal step that checks it replace the scaling stage and the final QP: the same
-    answer as HiGHS's two stages, in two DAQP solves (20 of 20 states). With a weight far too small
-    to be exact (1 instead of 1e6, then 1e8), the check sees it and the two stages run: the answer
-    is the same.
+def test_lowest_level_scaled_and_finished_in_one_certified_qp(robot, monkeypatch):
+    """Where only the lowest level gives way, one QP with its scaling weighted (an exact penalty),
+    certified by its active rows (`stationary`: max s has its KKT point there), replaces the
+    scaling stage and the final QP: the same answer as HiGHS's two stages, in one DAQP solve.
+    With a weight far too small to be exact (1 instead of 1e6, then 1e8), the certificate fails,
+    the checking step sees it and the two stages run: the answer is the same.
     (Too small a weight, 1e-6, would move the checking step too little to see.)"""
     from dcts_spec.solve import lexicographic
 
@@ -591,23 +591,56 @@ def test_lowest_level_scaled_and_finished_in_one_checked_qp(robot, monkeypatch):
     solves = []
     original = lexicographic.daqp_qp
     monkeypatch.setattr(lexicographic, "daqp_qp", lambda *a: solves.append(1) or original(*a))
-    two_solves = 0
+    one_solve = 0
     for cascade, lbx, ubx in states:
         solves.clear()
         x = cascade.finish_lowest(lbx, ubx)
-        two_solves += len(solves) == 2
+        one_solve += len(solves) == 1
         reference = _highs_scale_then_final(cascade, lbx, ubx)
         assert _rel(x, reference) < 1e-6, (x, reference)
-    assert two_solves >= 0.75 * len(states), f"checked at once in {two_solves} of {len(states)} states"
+    assert one_solve >= 0.75 * len(states), f"certified at once in {one_solve} of {len(states)} states"
     monkeypatch.setattr(lexicographic, "FINISH_WEIGHTS", (1.0,))
     caught = 0
     for cascade, lbx, ubx in states:
         solves.clear()
         x = cascade.finish_lowest(lbx, ubx)
-        caught += len(solves) > 2  # the check failed, and the stages ran
+        caught += len(solves) > 2  # neither the certificate nor the check passed, and the stages ran
         assert _rel(x, _highs_scale_then_final(cascade, lbx, ubx)) < 1e-6
     # (with so small a weight the answer's scaling can still be the largest, by chance: 2 of 20)
     assert caught >= 0.5 * len(states), f"the check failed in {caught} of {len(states)} states"
+
+
+@pytest.mark.parametrize("robot", ROBOTS)
+def test_a_certified_answer_is_the_lp_optimum_and_a_short_one_is_not(robot):
+    """`stationary` against HiGHS: on the states where the lowest level gives way, the largest s
+    with the levels above fixed (an LP). DAQP's answer of min ½‖x − c‖² − s/ρ, the scaling stage's
+    proximal QP, is certified for max s only where its s is HiGHS's largest (to 1e-9): at the
+    stage's ρ = 1e-8 in most states, at ρ = 1 (s held back by ‖x − c‖²) never where s falls short."""
+    from dcts_spec.solve.lexicographic import FixedEliminated, clip_to_daqp, daqp_qp, stationary
+
+    states = _lowest_gives_way(robot, 150)
+    certified, short = 0, 0
+    for cascade, lbx, ubx in states:
+        s, _ = cascade.structure.priorities[-1]
+        e = np.zeros(lbx.size)
+        e[s] = 1.0
+        best, status = solve_highs(e, cascade.A, cascade.lba, cascade.uba, lbx, ubx, sense_max=True)
+        assert best is not None, status
+        lower, upper = (np.empty(lbx.size + cascade.lba.size) for _ in range(2))
+        for source, target in ((lbx, lower[:lbx.size]), (ubx, upper[:lbx.size]),
+                               (cascade.lba, lower[lbx.size:]), (cascade.uba, upper[lbx.size:])):
+            clip_to_daqp(source, target)
+        qp = FixedEliminated.of(cascade.A, lower, upper)
+        for rho in (1e-8, 1.0):
+            x, flag, multipliers = daqp_qp(np.eye(lbx.size), -cascade.nominal - e / rho, qp)
+            assert flag == 1
+            if stationary(qp, multipliers, -e):
+                assert abs(x[s] - best[s]) <= 1e-9 * max(1.0, abs(best[s])), (rho, x[s], best[s])
+                certified += rho == 1e-8
+            elif x[s] < best[s] - 1e-6 * max(1.0, abs(best[s])):
+                short += 1
+    assert certified >= 0.75 * len(states), f"certified at ρ = 1e-8 in {certified} of {len(states)} states"
+    assert short >= 1, "the premise: an answer short of the largest s"
 
 
 # -- DAQP on the free variables only (FixedEliminated) ----------------------------------------------
@@ -637,7 +670,7 @@ def test_fixed_variables_eliminated_give_the_qp_with_them_fixed(robot):
                 clip_to_daqp(source, target)
             reduced = FixedEliminated.of(cascade.A, lower, upper)
             assert reduced.A.shape[1] == int(np.sum(lo != hi)) == reduced.free.size
-            x, flag = daqp_qp(cascade.H, cascade.f, reduced)
+            x, flag, _ = daqp_qp(cascade.H, cascade.f, reduced)
             reference, status = solve_highs(cascade.f, cascade.A, cascade.lba, cascade.uba, lo, hi, Q=cascade.H)
             if reference is None:  # the whole QP with every level nominal is infeasible here, as it should be
                 assert x is None and status == "Infeasible", (flag, status)
@@ -652,7 +685,7 @@ def test_fixed_variables_eliminated_give_the_qp_with_them_fixed(robot):
     # no variable free: the fixed point, for the caller to check on the rows
     point = cascade.nominal.copy()
     lower = np.concatenate((point, np.full(cascade.lba.size, -1e30)))
-    x, flag = daqp_qp(cascade.H, cascade.f, FixedEliminated.of(cascade.A, lower, lower.copy()))
+    x, flag, _ = daqp_qp(cascade.H, cascade.f, FixedEliminated.of(cascade.A, lower, lower.copy()))
     assert flag == 1 and np.array_equal(x, point)
 
 
@@ -673,7 +706,7 @@ def test_a_row_that_sees_no_free_variable_is_checked_on_its_own_scale():
     above = np.nextafter(fixed, np.inf)  # the row's lower bound, one ulp above x0's value
     lower = np.array([fixed, -1.0, -1.0, above, -1.0])
     upper = np.array([fixed, 1.0, 1.0, 1e30, 1.0])
-    x, flag = daqp_qp(H, f, FixedEliminated.of(A, lower, upper))
+    x, flag, _ = daqp_qp(H, f, FixedEliminated.of(A, lower, upper))
     assert flag == 1 and x[0] == fixed and np.allclose(x[1:], [-1.0, 1.0])
     cascade = Cascade(H, f, A, lower[:3], upper[:3], lower[3:], upper[3:], Structure(range(0), ()))
     assert cascade._solve(H, f, lower[:3], upper[:3]) is not None

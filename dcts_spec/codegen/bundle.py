@@ -574,6 +574,7 @@ def generate_sources(
         "BEND_STEP": c_double(lexicographic.BEND_STEP),
         "PROXIMAL_ITERATIONS": lexicographic.PROXIMAL_ITERATIONS,
         "PROXIMAL_TOLERANCE": c_double(lexicographic.PROXIMAL_TOLERANCE),
+        "STATIONARY_TOLERANCE": c_double(lexicographic.STATIONARY_TOLERANCE),
         "SPARE_VARIABLES": int(controller.law.spare_variables),
         "FEASIBILITY_TOLERANCE": c_double(lexicographic.FEASIBILITY_TOLERANCE),
         "MAX_EXTRAPOLATION": c_double(lexicographic.MAX_EXTRAPOLATION),

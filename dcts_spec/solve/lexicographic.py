@@ -7,7 +7,8 @@ a level therefore means fixing its variables (lb = ub), and the cascade is:
   1. every level above the lowest at its nominal value (s = 1, δ = 0), the lowest unbent, and
      ½xᵀHx + fᵀx − K s over the rest (`finish_lowest`): if this QP is feasible its answer has
      the lowest level's largest scaling, and is the lexicographic optimum. One solve when every
-     level is met (the usual case), two when the lowest is scaled.
+     level is met (the usual case), and also when the lowest is scaled if DAQP's active rows
+     certify that its scaling is the largest (`stationary`); otherwise a second QP checks it.
   2. otherwise, for each level i, highest first, with the levels above fixed (starting at the
      lowest level that can be scaled with every level above it met, if there is one):
        scale:  max sᵢ with δᵢ fixed (0), the levels below free;
@@ -79,6 +80,7 @@ BOUND_TOLERANCE = 1e-6
 # A row of a QP with fixed variables eliminated whose free coefficients are at most this times its
 # largest one sees no free variable (FixedEliminated): its rounding residue is ~1e-16.
 CONSTANT_ROW = 1e-12
+STATIONARY_TOLERANCE = 1e-10
 
 
 @dataclass(frozen=True)
@@ -174,30 +176,66 @@ def constant_rows(A: np.ndarray, A_free: np.ndarray) -> np.ndarray:
     return np.abs(A_free).max(axis=1, initial=0.0) <= CONSTANT_ROW * np.abs(A).max(axis=1, initial=0.0)
 
 
-def daqp_qp(H: np.ndarray, f: np.ndarray, qp: FixedEliminated) -> tuple[np.ndarray | None, int]:
+def daqp_qp(H: np.ndarray, f: np.ndarray, qp: FixedEliminated) -> tuple[np.ndarray | None, int, np.ndarray]:
     """One ordinary QP: min ½xᵀHx + fᵀx on the rows and bounds of `qp` (equal ends: an equality),
-    solved by DAQP for the free variables. Returns x (None if DAQP found no solution) and its exit
-    flag; with no variable free, the fixed point, for the caller's check of the rows."""
+    solved by DAQP for the free variables. Returns x (None if DAQP found no solution), its exit
+    flag and DAQP's multipliers of `qp`'s rows (`stationary` reads them); with no variable free,
+    the fixed point, for the caller's check of the rows."""
     free = qp.free
     if free.size == f.size:
         return _daqp(H, f, qp)
     x = qp.point.copy()
     if not free.size:
-        return x, 1
-    solved, flag = _daqp(H[qp.hessian_index], (f + H @ x)[free], qp)
+        return x, 1, np.zeros(qp.lower.size)
+    solved, flag, multipliers = _daqp(H[qp.hessian_index], (f + H @ x)[free], qp)
     if solved is None:
-        return None, flag
+        return None, flag, multipliers
     x[free] = solved
-    return x, flag
+    return x, flag, multipliers
 
 
-def _daqp(H: np.ndarray, f: np.ndarray, qp: FixedEliminated) -> tuple[np.ndarray | None, int]:
+def _daqp(H: np.ndarray, f: np.ndarray, qp: FixedEliminated) -> tuple[np.ndarray | None, int, np.ndarray]:
     # (no sense: DAQP takes the rows with equal ends for equalities itself, as in the C runtime)
-    x, _, flag, _ = daqp.solve(np.ascontiguousarray(H), np.ascontiguousarray(f), qp.A, qp.upper, qp.lower,
-                               **DAQP_SETTINGS)
+    x, _, flag, info = daqp.solve(np.ascontiguousarray(H), np.ascontiguousarray(f), qp.A, qp.upper, qp.lower,
+                                  **DAQP_SETTINGS)
     if flag != 1 or not np.isfinite(x).all():
-        return None, int(flag)
-    return np.asarray(x, dtype=float), int(flag)
+        return None, int(flag), info["lam"]
+    return np.asarray(x, dtype=float), int(flag), info["lam"]
+
+
+def stationary(qp: FixedEliminated, multipliers: np.ndarray, gradient: np.ndarray) -> bool:
+    """Does the answer DAQP gave for `qp` minimize a convex φ (its `gradient` ∇φ there, over every
+    variable) on the same set? A certificate, from the rows DAQP holds active (multipliers ≠ 0):
+    ∇φ + Cᵀμ = 0 in the free variables, with each inequality's μ on the side DAQP found it
+    active (λ > 0 upper, λ < 0 lower). μ by least squares on those rows; STATIONARY_TOLERANCE
+    bounds the residual relative to ∇φ. A stage whose iterate passes needs no further QP to
+    confirm it; one that does not goes on as before (the certificate can only be too strict:
+    degenerate active rows, a multiplier DAQP left out)."""
+    nfree = qp.free.size
+    g = gradient[qp.free]
+    active = np.flatnonzero(multipliers)
+    if active.size > nfree:  # (dependent rows)
+        return False
+    bounds, rows = active[active < nfree], active[active >= nfree] - nfree
+    C = np.zeros((active.size, nfree))
+    C[np.arange(bounds.size), bounds] = 1.0
+    C[bounds.size:] = qp.A[rows]
+    lam = np.concatenate((multipliers[bounds], multipliers[rows + nfree]))
+    equality = np.concatenate((qp.lower[bounds] == qp.upper[bounds], qp.lower[rows + nfree] == qp.upper[rows + nfree]))
+    size = math.sqrt(g.dot(g))
+    if active.size:
+        try:
+            low = np.linalg.cholesky(C @ C.T)
+        except np.linalg.LinAlgError:
+            return False
+        mu = -np.linalg.solve(low.T, np.linalg.solve(low, C @ g))
+        residual = g + C.T @ mu
+        wrong_side = ~equality & (mu * lam < 0) & (np.abs(mu) * np.sqrt((C * C).sum(axis=1)) > STATIONARY_TOLERANCE * size)
+        if wrong_side.any():
+            return False
+    else:
+        residual = g
+    return math.sqrt(residual.dot(residual)) <= STATIONARY_TOLERANCE * size
 
 
 def nominal_point(ubx: np.ndarray, structure: Structure) -> np.ndarray:
@@ -235,6 +273,7 @@ class Cascade:
         # variables' part by each QP
         self._lower, self._upper = np.empty(lbx.size + lba.size), np.empty(lbx.size + lba.size)
         self._layouts: dict[bytes, tuple] = {}  # FixedEliminated.of's
+        self._last_qp: tuple[FixedEliminated, np.ndarray] | None = None  # the last QP solved, and its multipliers
         self._set_row_bounds()
 
     def _set_row_bounds(self) -> None:
@@ -247,9 +286,11 @@ class Cascade:
         lower, upper = self._lower, self._upper
         clip_to_daqp(lbx, lower[: lbx.size])
         clip_to_daqp(ubx, upper[: ubx.size])
-        x, _ = daqp_qp(H, f, FixedEliminated.of(self.A, lower, upper, self._layouts))
+        qp = FixedEliminated.of(self.A, lower, upper, self._layouts)
+        x, _, multipliers = daqp_qp(H, f, qp)
         if x is None:
             return None
+        self._last_qp = qp, multipliers
         value = np.concatenate([x, self.A @ x])
         # On the clipped bounds: the same excess as on the infinite ones (x and Ax are far below
         # 1e30), and no ∞ − ∞ to guard against
@@ -271,7 +312,9 @@ class Cascade:
         While the active set stays the same, consecutive iterates move along the same face, so the
         next centre is extrapolated along d = x − x_previous, up to the first constraint it meets or
         the minimum of φ on the ray: an active-set step, which ends the iteration in a few solves.
-        A linear φ is done as soon as an iterate minimizes it over the variable bounds alone.
+        A linear φ is done as soon as an iterate minimizes it over the variable bounds alone, and
+        any φ as soon as DAQP's active rows certify an iterate (`stationary`): the QP that would
+        only confirm it is not run.
         A quadratic φ makes the Hessian I + diag(w)/ρ ill-conditioned for a small ρ, and DAQP then
         may fail on the thin feasible sets the levels above leave: if it does at once, ρ starts
         again at 1 and shrinks tenfold per step down to `step`, and a later failed solve returns
@@ -302,7 +345,7 @@ class Cascade:
                 continue
             solved_rho = rho
             previous, x = x, solved
-            if self._negligible(x - center, x):
+            if self._negligible(x - center, x) or stationary(*self._last_qp, weights * x + linear):
                 return x
             if best_bounds is not None and self._at_best_bounds(x, *best_bounds):
                 return x
@@ -371,13 +414,14 @@ class Cascade:
         """The lowest level's scaling stage and the final QP in one, its bend fixed in lbx/ubx and
         the levels above too: min ½xᵀHx + fᵀx − K s. A linear term large enough is an exact penalty:
         its answer has the largest feasible s, and minimizes ½xᵀHx + fᵀx with that s, as the two
-        stages would. That s is checked by one proximal step in H's metric from the answer,
+        stages would. That s is certified by the rows DAQP holds active (`stationary` for max s:
+        the usual case), or else checked by one proximal step in H's metric from the answer,
         argmin ½(y − x)ᵀH(y − x) − K s, which stays at x if and only if s is the largest (the same
         H, so the C code solves it from the same factorization and working set; from a scaling
         short of the largest it moves by about the gap or K/curvature, whichever is smaller, so
         K must be large for the check to see a small gap, as ρ must be small in `scale`); where
-        it moves, K was too small: a larger one, then the two stages. One QP if s reaches 1, two
-        if it is smaller, instead of three or more. None if no s ∈ [0, 1] is feasible.
+        it moves, K was too small: a larger one, then the two stages. One QP if s reaches 1 or is
+        certified, two if it is checked, instead of three or more. None if no s ∈ [0, 1] is feasible.
         `witness`: a feasible point (the bend's answer), whose s the final QP takes if DAQP fails
         the stages."""
         if self.structure.spare_variables:
@@ -396,6 +440,8 @@ class Cascade:
             if x is None:
                 break
             if x[s] >= ubx[s]:
+                return x
+            if stationary(*self._last_qp, -np.eye(1, x.size, s)[0]):
                 return x
             linear = -(self.H @ x)
             linear[s] -= weight
@@ -471,6 +517,8 @@ class Cascade:
             lbx[s] = ubx[s] = min(max(witness[s], self.lbx[s]), self.ubx[s])
             if self._nominal_through(i + 1, lbx, ubx):
                 continue  # every level so far nominal: the first QP, which was infeasible
+            if i + 2 == count and not self.structure.spare_variables:
+                continue  # the lowest level's first QP, `finish_lowest`, is this one where s can be 1
             x = self.final(i + 1, lbx, ubx)
             if x is not None:
                 return x
