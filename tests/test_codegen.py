@@ -836,6 +836,32 @@ tasks:
     gains: {{kp: 10, kd: 6}}
     reference: {{q: [0, 0.707, 0.7675, 0.6955, 0.8295, 0.529, 0.7275, 0.7785, 0, 0.707, 0.7675, 0.6955, 0, 0.707, 0.7675, 0.6955]}}
 """,
+    # a human model's 27 joints, both hands and both feet at three priorities above a posture, twice
+    # the URDF's torques: a well-determined vector's QP solution had an entry of 3.7 beside ones of
+    # 8e3, and C's warm start and Python's cold one resolved it 1e-5 apart (2.8e-6 of itself, 1e-9
+    # of the solution): x is compared relative to its largest entry (templates/test.c.in)
+    "human_four_levels": """version: 1
+name: human_four_levels
+robot:
+  urdf: {urdf}/human_description/robots/human.urdf
+  locked_joints: {{left_ankle_Z: -0.392699, left_ankle_X: 0.1309, left_clavicle_joint_X: 0.349067, middle_cervical_Z: 0, middle_cervical_X: 0, middle_cervical_Y: 0, right_clavicle_joint_X: 0.349067, right_ankle_Z: -0.392699, right_ankle_X: 0.1309}}
+limits:
+  joint_torque: {{max: [370, 240, 120, 260, 380, 320, 380, 380, 370, 184, 142, 104, 154, 30, 370, 200, 184, 142, 104, 154, 30, 200, 200, 370, 240, 120, 260], allow_outside_urdf: true}}
+tasks:
+  - {{name: left_hand, type: position, frame: left_hand, priority: 1, gains: {{kp: 100, kd: 20}},
+     reference: {{position: [0.193008, -0.123255, -0.483907]}}}}
+  - {{name: right_hand, type: position, frame: right_hand, priority: 2, gains: {{kp: 100, kd: 20}},
+     reference: {{position: [0.193008, -0.123255, 0.583907]}}}}
+  - {{name: left_foot, type: position, frame: left_foot, priority: 3, gains: {{kp: 100, kd: 20}},
+     reference: {{position: [0.253252, -0.694826, -0.0356217]}}}}
+  - {{name: right_foot, type: position, frame: right_foot, priority: 3, gains: {{kp: 100, kd: 20}},
+     reference: {{position: [0.203252, -0.644826, 0.135622]}}}}
+  - name: posture
+    type: joint
+    priority: 4
+    gains: {{kp: 10, kd: 6}}
+    reference: {{q: [1.0472, 0.261799, -0.261799, 1.57079, 1.1781, 0, 0.32725, 0, 0, 0, 1.04719, 0.785395, 1.309, 1.39626, 0, 0, 0, 1.04719, 0.785395, 1.309, 1.39626, 0, 0, 1.0472, 0.261799, -0.261799, 1.57079]}}
+""",
     # a humanoid's upper body (17 joints) with both hands' poses above the torso's orientation:
     # after a relaxation, a warm bend stage came back "optimal" with a scaling 3.9e-6 below 0, the
     # C cascade stopped the bend there, and the top level's scaling was 1.3 % apart (ctl_daqp:
