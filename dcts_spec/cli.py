@@ -195,6 +195,10 @@ def validate(
             with _feedback(quiet):
                 phase(f"compiling {report.spec.name} with every formulation")
                 result["formulations"] = compile_check(report)
+            own = result["formulations"][report.spec.controller.formulation]
+            if not own["ok"]:  # the spec's own formulation cannot build it: not a valid spec
+                failed = True
+                result["valid"] = False
         results.append(result)
         if not as_json:
             typer.echo(report.summary())

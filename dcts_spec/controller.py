@@ -20,12 +20,13 @@ import numpy as np
 from .buffered_function import BufferedFunction
 from .formulations import FORMULATIONS, ControlLaw, ControlProblem, build_problem
 from .formulations.fallback import fallback_torque
+from .formulations.hierarchy import OverConstrainedLevel
 from .formulations.parameters import ParameterLayout
 from .formulations.qp import BOUNDS
 from .parameter_ramp import ParameterRamp, ramp_steps
 from .robot.model import Robot
 from .solve import Structure, check_bounds, rounding_spread, solve_lexicographic, unbounded_solution
-from .spec import Spec, load_spec
+from .spec import Spec, SpecError, load_spec
 from .tasks import ReferenceInput
 from .validate import ValidationReport, validate_spec
 
@@ -133,6 +134,16 @@ def least_squares_scaling(achieved: np.ndarray, unbounded: np.ndarray) -> float:
     return float(np.clip(1.0 - np.linalg.norm(achieved - unbounded) / (np.linalg.norm(unbounded) + 1e-9), 0.0, 1.0))
 
 
+def control_law(spec: Spec, problem: ControlProblem, formulation: str) -> ControlLaw:
+    """The formulation's control law of the spec. A level above the lowest that its tasks
+    over-constrain at every configuration is an error of the spec, at that priority's line."""
+    try:
+        return FORMULATIONS[formulation](problem)
+    except OverConstrainedLevel as error:
+        task = spec.tasks.index(spec.tasks_at(error.priority)[0])
+        raise SpecError([spec.source.diagnostic(("tasks", task, "priority"), str(error))]) from None
+
+
 class Controller:
     """A spec compiled for one formulation; `step` runs it from Python."""
 
@@ -143,7 +154,7 @@ class Controller:
         if self.formulation not in FORMULATIONS:
             raise ValueError(f"unknown formulation {self.formulation!r}; choose one of {', '.join(FORMULATIONS)}")
         self.problem = build_problem(spec, robot)
-        self.law = FORMULATIONS[self.formulation](self.problem)
+        self.law = control_law(spec, self.problem, self.formulation)
         self.data = data_function(self.problem, self.law)
         self._ref_size = int(self.problem.ref.shape[0])  # (asking the SX each step costs microseconds)
         self._data_buffer: BufferedFunction | None = None
@@ -376,10 +387,10 @@ def compile_check(report: ValidationReport) -> dict[str, dict]:
     projector's closed form at 28 joints, 17 s and 1 GB, where counting without it takes 1 s."""
     problem = build_problem(report.spec, report.robot)
     out: dict[str, dict] = {}
-    for name, formulation in FORMULATIONS.items():
+    for name in FORMULATIONS:
         try:
-            law = formulation(problem)
-        except ValueError as error:
+            law = control_law(report.spec, problem, name)
+        except (ValueError, SpecError) as error:
             out[name] = {"ok": False, "error": str(error), "summary": f"cannot compile: {error}"}
             continue
         operations = data_function(problem, law, cse=False).n_instructions()

@@ -141,6 +141,8 @@ def validate_spec(spec: Spec) -> ValidationReport:
         raise SpecError(diags)
     levels, level_diags = _levels(spec, robot, q0)
     diags += level_diags
+    if any(d.severity == "error" for d in level_diags):
+        raise SpecError(diags)
     gravity = pin.computeGeneralizedGravity(robot.model, robot.model.createData(), q0)
     over = np.flatnonzero(np.abs(gravity) > robot.limits.tau_max)
     if over.size:
@@ -324,6 +326,7 @@ def _levels(spec: Spec, robot: Robot, q: np.ndarray) -> tuple[list[LevelReport],
     levels, diags = [], []
     stacked = np.zeros((0, robot.nv))
     priorities = spec.priority_levels
+    asked = 0  # directions the levels so far ask for
     for p in priorities:
         rows, entries = [], []
         for task_spec in spec.tasks_at(p):
@@ -343,8 +346,16 @@ def _levels(spec: Spec, robot: Robot, q: np.ndarray) -> tuple[list[LevelReport],
         after = int(np.linalg.matrix_rank(stacked, RANK_TOLERANCE))
         level = LevelReport(p, entries, J_level.shape[0], after - before, robot.nv - before)
         levels.append(level)
+        asked += level.dimension
         if level.over_constrained and p != priorities[-1]:
             i = spec.tasks.index(spec.tasks_at(p)[0])
+            if asked > robot.nv:  # at every configuration, not only this one: the controller cannot be built
+                diags.append(spec.source.diagnostic(
+                    ("tasks", i, "priority"),
+                    f"priority {p} asks for {level.dimension} directions, and with the higher priorities "
+                    f"{asked} of the robot's {robot.nv} joints' directions: only the lowest priority may be "
+                    "over-constrained (give these tasks the lowest priority, or fewer axes)"))
+                continue
             diags.append(spec.source.diagnostic(
                 ("tasks", i, "priority"),
                 f"priority {p} asks for {level.dimension} directions but only {level.rank} are free of higher priorities "

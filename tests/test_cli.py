@@ -171,3 +171,22 @@ def test_shell_completion_is_offered() -> None:
     assert script.returncode == 0, script.stderr
     assert "--install-completion" in invoke("--help").output
 
+
+
+@pytest.mark.parametrize("command", ("validate --check", "compile", "simulate --runtime python"))
+def test_a_level_above_the_lowest_over_constrained_everywhere_is_a_located_error(command: str, tmp_path: Path) -> None:
+    """The same tool position at priorities 1 and 2 above a damping (3 + 3 directions of 7 joints:
+    the count does not show it, every configuration does). Each command says where, and exits 1: validate --check
+    said "valid", compile gave no line and simulate --runtime python an internal error (exit 3)."""
+    text = MINIMAL.read_text().replace("name: minimal", "name: twice")
+    tasks = "".join(f"  - {{name: tool_{p}, type: position, frame: tool, priority: {p}, gains: {{kp: 100, kd: 20}}, "
+                    "reference: {position: [0.5, 0.0, 0.5]}}\n" for p in (1, 2))
+    tasks += "  - {name: damping, type: joint, priority: 3, gains: {kp: 0, kd: 5}}\n"
+    spec = tmp_path / "twice.yaml"
+    spec.write_text(text[:text.index("tasks:")] + "tasks:\n" + tasks + text[text.index("scenario:"):])
+    args = command.split()
+    result = invoke(args[0], str(spec), *args[1:], *(["--out", str(tmp_path / "out")] if args[0] in WRITERS else []))
+    assert result.exit_code == 1, result.output
+    assert "twice.yaml:" in result.output and "priority 2 is over-constrained" in result.output
+    assert "Traceback" not in result.output
+    assert not (tmp_path / "out").exists()

@@ -149,6 +149,16 @@ def least_squares_step(level: Level, acceleration: ca.SX, N: ca.SX, mass: ca.SX)
     return acceleration + ca.mtimes(N, z)
 
 
+class OverConstrainedLevel(ValueError):
+    """A priority level above the lowest whose tasks conflict with the higher ones everywhere."""
+
+    def __init__(self, priority: int):
+        super().__init__(
+            f"priority {priority} is over-constrained: its tasks conflict with the higher priorities at every "
+            "configuration tried; only the lowest priority level may ask for more than the freedom left")
+        self.priority = priority
+
+
 @dataclass(frozen=True)
 class LevelStructure:
     """How many levels the exact recursion handles, and what freedom is left after them."""
@@ -189,10 +199,6 @@ def level_structure(problem: ControlProblem) -> LevelStructure:
             N = N - Jbar @ Jr
     bad = [i for i in range(len(levels) - 1) if deficient[i]]
     if bad:
-        p = levels[bad[0]].priority
-        raise ValueError(
-            f"priority {p} is over-constrained: its tasks conflict with the higher priorities at every "
-            "configuration tried; only the lowest priority level may ask for more than the freedom left"
-        )
+        raise OverConstrainedLevel(levels[bad[0]].priority)
     exact = len(levels) - 1 if deficient[-1] else len(levels)
     return LevelStructure(exact, bool(deficient[-1]), problem.n - sum(lv.dim for lv in levels[:exact]))
