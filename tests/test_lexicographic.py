@@ -472,6 +472,35 @@ def test_a_stage_stops_when_only_noise_moves(monkeypatch):
     assert _rel(x, _converged(monkeypatch, args, structure)) < 1e-8
 
 
+def test_the_relaxation_is_solved_where_daqp_cycles_at_its_first_step():
+    """QP data of a golden state of a spec with the same tool position at two priorities (the
+    lower one least squares): even the top level's bend is infeasible, and DAQP cycled (exit -2)
+    on the relaxation's first QP at ρ = 1e-8. The Python runtime fell back while the C one, from
+    a warm start, solved it. Again at a gentler step, the relaxation's Σσ is HiGHS's least."""
+    from dcts_spec.solve.lexicographic import Cascade
+
+    args, structure = saved_qp("relaxation_cycles")
+    cascade = Cascade(*args, structure)
+    assert cascade.levels() is None and cascade.relax()
+    assert solve_lexicographic(*args, structure) is not None
+    H, f, A, lbx, ubx, lba, uba = args
+    rows = structure.bound_rows
+    R, lo, hi = A[rows], lba[rows], uba[rows]
+    other = np.delete(np.arange(lba.size), np.arange(rows.start, rows.stop))
+    r = R.shape[0]
+    # min Σσ over (x, σ): the other rows as they are, lo ≤ R x + σ, R x − σ ≤ hi, σ ≥ 0
+    rows_lp = np.block([[A[other], np.zeros((other.size, r))], [R, np.eye(r)], [R, -np.eye(r)]])
+    lower = np.concatenate([lba[other], lo, np.full(r, -np.inf)])
+    upper = np.concatenate([uba[other], np.full(r, np.inf), hi])
+    best, status = solve_highs(np.concatenate([np.zeros(lbx.size), np.ones(r)]), rows_lp, lower, upper,
+                               np.concatenate([lbx, np.zeros(r)]), np.concatenate([ubx, np.full(r, np.inf)]))
+    assert best is not None, status
+    value = R @ cascade.relaxed_point
+    achieved = np.maximum(0.0, np.maximum(lo - value, value - hi)).sum()
+    least = best[lbx.size:].sum()
+    assert achieved <= least + 1e-6 * max(1.0, least), (achieved, least)
+
+
 def test_a_bend_stage_goes_on_where_daqp_fails_at_a_smaller_step():
     """QP data of a golden state of TALOS's torso and arms (16 joints, the URDF's torque limits;
     scripts/bench_sizes.py's talos16 row): a bound relaxed, then the top level bent. DAQP called

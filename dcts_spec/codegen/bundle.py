@@ -575,6 +575,7 @@ def generate_sources(
         "PROXIMAL_ITERATIONS": lexicographic.PROXIMAL_ITERATIONS,
         "PROXIMAL_TOLERANCE": c_double(lexicographic.PROXIMAL_TOLERANCE),
         "STATIONARY_TOLERANCE": c_double(lexicographic.STATIONARY_TOLERANCE),
+        "RELAX_RETRY_STEP": c_double(lexicographic.RELAX_RETRY_STEP),
         "SPARE_VARIABLES": int(controller.law.spare_variables),
         "FEASIBILITY_TOLERANCE": c_double(lexicographic.FEASIBILITY_TOLERANCE),
         "MAX_EXTRAPOLATION": c_double(lexicographic.MAX_EXTRAPOLATION),

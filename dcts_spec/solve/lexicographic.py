@@ -56,6 +56,10 @@ SCALE_STEP = 1e-8
 BEND_STEP = 1e-5
 MAX_EXTRAPOLATION = 1e6
 RELAX_MARGIN = 1e-7  # relative: a relaxed bound is widened this much beyond what was achieved
+# The relaxation is always feasible (every bound has its slack), so a failed first QP is DAQP's: it
+# cycled at ρ = 1e-8 on a state of a spec with the same task at two levels (golden vector: the
+# Python runtime fell back, the C one, warm, solved it), and solved it at 1e-7 and above.
+RELAX_RETRY_STEP = 1e-6
 EXTRAPOLATION_MARGIN = 1e-9
 PROXIMAL_ITERATIONS = 30
 # (1e-10 was at DAQP's resolution: 5 % of the bench's closed-loop states ran a stage's 30 QPs
@@ -591,6 +595,8 @@ class Cascade:
         slack.nominal = np.concatenate([self.nominal, np.zeros(r)])
         linear = np.concatenate([np.zeros(nx), np.ones(r)])
         x = slack._proximal(np.zeros(nx + r), linear, SCALE_STEP, slack.lbx, slack.ubx)
+        if x is None:  # (it is feasible: DAQP failed, e.g. cycled, at that step) a gentler one
+            x = slack._proximal(np.zeros(nx + r), linear, RELAX_RETRY_STEP, slack.lbx, slack.ubx)
         if x is None:
             return False
         self.relaxed_point = x[:nx]
