@@ -140,8 +140,7 @@ def control_law(spec: Spec, problem: ControlProblem, formulation: str) -> Contro
     try:
         return FORMULATIONS[formulation](problem)
     except OverConstrainedLevel as error:
-        task = spec.tasks.index(spec.tasks_at(error.priority)[0])
-        raise SpecError([spec.source.diagnostic(("tasks", task, "priority"), str(error))]) from None
+        raise SpecError([spec.source.diagnostic(spec.priority_path(error.priority), str(error))]) from None
 
 
 class Controller:

@@ -348,18 +348,18 @@ def _levels(spec: Spec, robot: Robot, q: np.ndarray) -> tuple[list[LevelReport],
         levels.append(level)
         asked += level.dimension
         if level.over_constrained and p != priorities[-1]:
-            i = spec.tasks.index(spec.tasks_at(p)[0])
             if asked > robot.nv:  # at every configuration, not only this one: the controller cannot be built
                 diags.append(spec.source.diagnostic(
-                    ("tasks", i, "priority"),
+                    spec.priority_path(p),
                     f"priority {p} asks for {level.dimension} directions, and with the higher priorities "
                     f"{asked} of the robot's {robot.nv} joints' directions: only the lowest priority may be "
                     "over-constrained (give these tasks the lowest priority, or fewer axes)"))
-                continue
-            diags.append(spec.source.diagnostic(
-                ("tasks", i, "priority"),
-                f"priority {p} asks for {level.dimension} directions but only {level.rank} are free of higher priorities "
-                "at the initial configuration; only the lowest priority may be over-constrained", "warning"))
+            else:
+                diags.append(spec.source.diagnostic(
+                    spec.priority_path(p),
+                    f"priority {p} asks for {level.dimension} directions but only {level.rank} are free of higher "
+                    "priorities at the initial configuration; only the lowest priority may be over-constrained",
+                    "warning"))
     return levels, diags
 
 

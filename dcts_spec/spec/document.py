@@ -83,3 +83,7 @@ class Spec(StrictModel):
 
     def tasks_at(self, priority: int) -> list[TaskSpec]:
         return [t for t in self.tasks if t.priority == priority]
+
+    def priority_path(self, priority: int) -> tuple[str, int, str]:
+        """Where a priority level is written: the `priority` key of its first task."""
+        return "tasks", self.tasks.index(self.tasks_at(priority)[0]), "priority"
