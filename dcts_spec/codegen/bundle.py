@@ -43,7 +43,7 @@ DAQP_VERSION = "0.11.0"  # the C sources compiled into every bundle; the Python 
 SOLVER_STORAGE_BYTES = 1024  # room for DAQP's structs in the workspace (checked at compile time)
 GOLDEN_COUNT = 128
 DAQP_INT_SETTINGS = ("cycle_tol", "iter_limit", "eq_reduction")
-DAQP_FLOAT_SETTINGS = ("primal_tol", "dual_tol", "zero_tol", "pivot_tol", "progress_tol", "fval_bound", "eps_prox",
+DAQP_FLOAT_SETTINGS = ("primal_tol", "dual_tol", "zero_tol", "pivot_tol", "progress_tol", "sing_tol", "fval_bound", "eps_prox",
                        "eta_prox", "rho_soft", "rel_subopt", "abs_subopt")
 
 
