@@ -22,6 +22,9 @@ from .model import CartesianBound, JointLimits, Robot, no_position_range
 from .urdf import build_model
 
 AXIS_INDEX = {"x": 0, "y": 1, "z": 2}
+# A joint moving less inertia than this, relative to the largest joint's (kg·m² or kg), moves
+# none: the URDF's massless links (exactly 0 in Pinocchio's mass matrix)
+MOVED_INERTIA = 1e-12
 LISTED_FRAMES = 8  # an unknown frame's message lists this many candidates, the closest first
 
 
@@ -33,6 +36,7 @@ def resolve_robot(spec: Spec) -> tuple[Robot, list[Diagnostic]]:
     if model is None:
         raise SpecError(diags)
     _check_joint_types(model, src, diags)
+    _check_moved_inertia(spec, model, diags)
     _add_frames(spec, model, diags)
     urdf_limits = JointLimits.of_model(model)
     empty = no_position_range(model)
@@ -130,6 +134,25 @@ def _check_joint_types(model: pin.Model, src: SourceMap, diags: list[Diagnostic]
                     "prismatic joints are supported — lock it with robot.locked_joints",
                 )
             )
+
+
+def _check_moved_inertia(spec: Spec, model: pin.Model, diags: list[Diagnostic]) -> None:
+    """Every joint must move some inertia: a joint whose links, and every link beyond it, have no
+    mass (massless fingers in some URDFs) makes the mass matrix singular, and no dynamics-based
+    controller exists for it (M(q)'s diagonal entry is that inertia about the joint's axis)."""
+    if any(joint.nv != 1 for joint in model.joints[1:]):
+        return  # (reported by _check_joint_types)
+    data = model.createData()
+    diagonal = np.diag(pin.crba(model, data, pin.neutral(model))) + model.armature
+    empty = diagonal <= MOVED_INERTIA * max(1.0, float(diagonal.max()))
+    if empty.any():
+        names = [model.names[j] for j in range(1, model.njoints) if empty[model.joints[j].idx_v]]
+        where = ("robot", "model") if spec.robot.model is not None else ("robot", "urdf")
+        joints, them = (f"joints {', '.join(names)} move", "them") if len(names) > 1 else (f"joint {names[0]} moves", "it")
+        diags.append(spec.source.diagnostic(
+            where, f"{joints} no mass or inertia (every link beyond {them} is massless in the URDF), so the "
+                   f"mass matrix is singular and no torque controller exists: lock {them} with "
+                   f"robot.locked_joints, or give those links inertia"))
 
 
 def _add_frames(spec: Spec, model: pin.Model, diags: list[Diagnostic]) -> None:
