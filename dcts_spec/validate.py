@@ -101,14 +101,20 @@ class ValidationReport:
             tasks = ", ".join(f"{n} ({t}, {d})" for n, t, d in lv.tasks)
             lines.append(f"  priority {lv.priority}  dim {lv.dimension}, rank {lv.rank} of {lv.free_before} free: {tasks}")
 
-        def fmt(a: np.ndarray, scale: float = 1.0) -> str:
-            return "[" + ", ".join(("∞" if v > 0 else "-∞") if not np.isfinite(v) else f"{v * scale:.4g}" for v in a) + "]"
+        def fmt(a: np.ndarray, scale: float | np.ndarray = 1.0) -> str:
+            scaled = np.broadcast_to(scale, np.shape(a)) * np.where(np.isfinite(a), a, 0.0)
+            return "[" + ", ".join(("∞" if v > 0 else "-∞") if not np.isfinite(v) else f"{w:.4g}"
+                                   for v, w in zip(a, scaled)) + "]"
 
-        deg = 180.0 / np.pi
+        prismatic = robot.prismatic
+        deg = np.where(prismatic, 1.0, 180.0 / np.pi)  # a prismatic joint's entries stay in m, m/s, N
         lines.append(f"  limits      q ∈ {fmt(lim.q_min, deg)} .. {fmt(lim.q_max, deg)} deg")
         lines.append(f"              |q̇| ≤ {fmt(lim.v_max, deg)} deg/s, |τ| ≤ {fmt(lim.tau_max)} Nm")
         if np.isfinite(lim.a_max).any():
             lines.append(f"              |q̈| ≤ {fmt(lim.a_max, deg)} deg/s²")
+        if prismatic.any():
+            names = ", ".join(n for n, p in zip(robot.joint_names, prismatic) if p)
+            lines.append(f"              (m, m/s, N, m/s² for the prismatic {names})")
         for b in robot.cartesian_bounds:
             lines.append(f"              {bound_text(b)}"
                          + ("" if b.axis is not None else f" (world normal {fmt(np.array(b.direction))})"))

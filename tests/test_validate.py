@@ -229,6 +229,24 @@ def test_unknown_frame_of_a_small_robot_lists_them_all(tmp_path: Path) -> None:
         assert _errors(spec)[line] == f"{wording}; frames: base, shoulder, arm"
 
 
+def test_summary_gives_a_prismatic_joint_in_metres(tmp_path: Path) -> None:
+    """TIAGo Pro's torso lift (prismatic, 0 to 0.35 m at 0.035 m/s) was shown as 0 to 20.05 deg at
+    2.005 deg/s (first tried from outside); the revolute joints stay in degrees."""
+    spec = tmp_path / "tiago.yaml"
+    urdf = example_robot_data_dir() / "tiago_pro_description" / "robots" / "tiago_pro.urdf"
+    wheels = ", ".join(f"wheel_{side}_joint: 0" for side in ("front_left", "front_right", "rear_left", "rear_right"))
+    spec.write_text(
+        f"version: 1\nname: lift\nrobot:\n  urdf: {urdf}\n  locked_joints: {{{wheels}}}\n"
+        "tasks:\n  - {name: reach, type: position, frame: arm_left_tool_link, priority: 1, gains: {kp: 10, kd: 6}, "
+        "reference: {position: [0.5, 0.3, 0.9]}}\n"
+    )
+    lines = validate_file(spec).summary().splitlines()
+    position = next(line for line in lines if "q ∈" in line)
+    assert position.split("q ∈ [")[1].startswith("0, -30,") and ".. [0.35, 270," in position, position
+    assert "|q̇| ≤ [0.035, 143.2," in next(line for line in lines if "|q̇|" in line)
+    assert "(m, m/s, N, m/s² for the prismatic torso_lift_joint" in "\n".join(lines)
+
+
 def test_summary_words_cartesian_bounds_like_the_run_summary(tmp_path: Path) -> None:
     """One-sided bounds leave out the infinite side, with the unit on each number."""
     spec = tmp_path / "bounded.yaml"

@@ -17,7 +17,7 @@ import pinocchio as pin
 
 from ..spec import load_spec
 from .builtin import BUILTIN_ROBOTS, builtin_locked_joints, builtin_urdf_path, load_builtin_model
-from .model import JointLimits
+from .model import JointLimits, is_prismatic
 from .resolve import _quiet_stderr, resolve_robot
 from .urdf import build_model
 
@@ -163,7 +163,7 @@ def _description(name: str, source: str, urdf: Path, model: pin.Model, limits: J
     joints = []
     for jid in range(1, model.njoints):
         joint = model.joints[jid]
-        kind = _joint_type(joint.shortname())
+        kind = "prismatic" if is_prismatic(joint) else "revolute"
         unit = "m" if kind == "prismatic" else "rad"
         q, v = joint.idx_q, joint.idx_v
         if kind == "revolute" and limits.unbounded(q):
@@ -174,11 +174,6 @@ def _description(name: str, source: str, urdf: Path, model: pin.Model, limits: J
     frames = [Frame(f.name, FRAME_KINDS.get(f.type, str(f.type)), model.names[f.parentJoint])
               for f in model.frames if f.name != "universe"]
     return RobotDescription(name, source, str(urdf), joints, dict(locked), frames, _links(urdf))
-
-
-def _joint_type(shortname: str) -> str:
-    """Pinocchio's joint model name (JointModelRZ, JointModelPrismaticUnaligned, …)."""
-    return "prismatic" if shortname.removeprefix("JointModel").startswith("P") else "revolute"
 
 
 def _finite(value: float) -> float | None:

@@ -78,6 +78,12 @@ class CartesianBound:
         return np.asarray(position) @ np.asarray(self.direction)
 
 
+def is_prismatic(joint: pin.JointModel) -> bool:
+    """Does the joint translate (m, m/s, N) rather than rotate? From Pinocchio's joint model name
+    (JointModelPZ, JointModelPrismaticUnaligned, … against JointModelRZ, …)."""
+    return joint.shortname().removeprefix("JointModel").startswith("P")
+
+
 @dataclass
 class Robot:
     """A fixed-base robot ready for the compiler: model, joint names, limits."""
@@ -97,6 +103,11 @@ class Robot:
     def joint_names(self) -> list[str]:
         """Names of the (1-DOF) joints, in the order of q."""
         return [self.model.names[i] for i in range(1, self.model.njoints)]
+
+    @property
+    def prismatic(self) -> np.ndarray:
+        """Per joint (the order of q): does it translate?"""
+        return np.array([is_prismatic(self.model.joints[j]) for j in range(1, self.model.njoints)], dtype=bool)
 
     def has_frame(self, name: str) -> bool:
         return self.model.existFrame(name)
