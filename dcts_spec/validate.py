@@ -235,8 +235,29 @@ def _check_tasks(spec: Spec, robot: Robot) -> list[Diagnostic]:
             size = size_of(getattr(task.gains, name))
             if size is not None and size != dim:
                 diags.append(src.diagnostic(at + ("gains", name), f"{size} values for a joint task of {dim} joints"))
-        if task.reference is not None and task.reference.q is not None and len(task.reference.q) != dim:
-            diags.append(src.diagnostic(at + ("reference", "q"), f"{len(task.reference.q)} values for a joint task of {dim} joints"))
+        if task.reference is not None and task.reference.q is not None:
+            if len(task.reference.q) != dim:
+                diags.append(src.diagnostic(at + ("reference", "q"), f"{len(task.reference.q)} values for a joint task of {dim} joints"))
+            else:
+                diags.extend(_targets_beyond_range(spec, robot, task, at))
+    return diags
+
+
+def _targets_beyond_range(spec: Spec, robot: Robot, task: TaskSpec, at: tuple) -> list[Diagnostic]:
+    """A joint target outside the joint's position range (a warning: the joint stops at its limit
+    and the level gives way there, which may be what was meant)."""
+    ref, lim, diags = task.reference, robot.limits, []
+    for i, (name, value) in enumerate(zip(task_joints(task, robot), to_si(list(ref.q), ref.unit), strict=True)):
+        j = robot.joint_names.index(name)
+        unit = "m" if robot.prismatic[j] else ref.unit
+        scale = 1.0 if robot.prismatic[j] else to_si(1.0, ref.unit)
+        lo, hi = lim.q_min[j], lim.q_max[j]
+        if lo - 1e-9 <= value <= hi + 1e-9:
+            continue
+        diags.append(spec.source.diagnostic(
+            at + ("reference", "q", i),
+            f"{value / scale:.6g} {unit} is outside {name}'s range [{lo / scale:.6g}, {hi / scale:.6g}] {unit}: the "
+            f"joint stops at its limit and this priority level gives way there", "warning"))
     return diags
 
 

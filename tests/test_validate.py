@@ -229,6 +229,20 @@ def test_unknown_frame_of_a_small_robot_lists_them_all(tmp_path: Path) -> None:
         assert _errors(spec)[line] == f"{wording}; frames: base, shoulder, arm"
 
 
+def test_a_joint_target_beyond_the_joints_range_is_a_warning_at_its_value(tmp_path: Path) -> None:
+    """A posture beyond a joint limit (PR2's head pan at 3.5 rad, first tried from outside) was
+    accepted silently; its level can only give way at the limit. Written in the spec's unit."""
+    spec = tmp_path / "posture.yaml"
+    spec.write_text(
+        "version: 1\nname: posture\nrobot: {model: iiwa14}\n"
+        "tasks:\n  - name: posture\n    type: joint\n    priority: 1\n    gains: {kp: 10, kd: 6}\n"
+        "    reference: {unit: deg, q: [0, 30, 0, -140, 0, 60, 0]}\n"
+    )
+    warnings = [w for w in _warnings(spec) if "outside" in w[1]]
+    assert warnings == [(9, "-140 deg is outside joint4's range [-120, 120] deg: the "
+                             "joint stops at its limit and this priority level gives way there")]
+
+
 def test_summary_gives_a_prismatic_joint_in_metres(tmp_path: Path) -> None:
     """TIAGo Pro's torso lift (prismatic, 0 to 0.35 m at 0.035 m/s) was shown as 0 to 20.05 deg at
     2.005 deg/s (first tried from outside); the revolute joints stay in degrees."""

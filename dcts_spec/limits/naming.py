@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..robot.collision import CollisionModel
-from ..robot.model import CartesianBound, Robot
+from ..robot.model import CartesianBound, Robot, is_prismatic
 
 
 def interval_text(name: str, lower: float, upper: float, unit: str, digits: int = 4) -> str:
@@ -39,8 +39,7 @@ def joint_bound_text(robot: Robot, j: int) -> str:
 
 def joint_unit(robot: Robot, j: int) -> str:
     """"m" for a prismatic joint, "rad" for a revolute one."""
-    kind = robot.model.joints[j + 1].shortname()  # joint 0 is the universe
-    return "m" if kind.startswith("JointModelP") else "rad"
+    return "m" if is_prismatic(robot.model.joints[j + 1]) else "rad"  # (joint 0 is the universe)
 
 
 def joint_row_name(joint: str) -> str:
