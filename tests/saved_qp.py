@@ -13,5 +13,6 @@ def saved_qp(name: str) -> tuple[list[np.ndarray], Structure]:
     """H, f, A, lbx, ubx, lba, uba and the Structure of tests/data/NAME.npz."""
     data = np.load(Path(__file__).parent / "data" / f"{name}.npz")
     bends = [tuple(data[f"bend{k}"].tolist()) for k in range(len(data["scaling"]))]
-    structure = Structure(range(*data["bound_rows"]), tuple(zip(data["scaling"].tolist(), bends)))
+    spare = bool(data["spare_variables"]) if "spare_variables" in data else False
+    structure = Structure(range(*data["bound_rows"]), tuple(zip(data["scaling"].tolist(), bends)), spare)
     return [data[k] if k in ("H", "A") else data[k].ravel() for k in ("H", "f", "A", "lbx", "ubx", "lba", "uba")], structure

@@ -768,3 +768,36 @@ def test_the_stages_after_a_relaxation_run_on_its_sliver():
     # the largest scaling with that bend: HiGHS's least-bend point already has s = 1 (an LP with
     # the bend fixed, as in the test above, is infeasible by rounding on this sliver)
     assert least[s] >= (1 - 1e-9) * ubx[s] and x[s] >= (1 - 1e-9) * ubx[s], (x[s] / ubx[s], least[s] / ubx[s])
+
+
+def test_a_bend_stage_goes_on_where_daqp_fails_at_its_step():
+    """QP data of a golden state of a 26-joint Centauro with a run-time activation (first tried
+    from outside; spare variables): the second bend level's second proximal step, at the stage's
+    ρ = 1e-5, DAQP called infeasible in Python and solved in C. The stage ended at its first
+    iterate in Python and went on in C, and the level's scaling after it parted by 4e-4 (a
+    status-"ok" golden vector). Tried again at ten times that ρ, the stage reaches the least bend
+    that proximal steps at a gentle ρ (1e-3, up to 300 of them) reach; its first iterate is 1.4e-8
+    above it."""
+    from dcts_spec.solve.lexicographic import Cascade
+
+    args, structure = saved_qp("bend_fails_at_its_step")
+    data = np.load(Path(__file__).parent / "data" / "bend_fails_at_its_step.npz")
+    cascade = Cascade(*args, structure)
+    cascade.lba, cascade.uba = data["stage_lba"].copy(), data["stage_uba"].copy()
+    cascade._set_row_bounds()
+    lo, hi = data["stage_lbx"], data["stage_ubx"]
+    _, bend = structure.priorities[1]
+    weights = np.zeros(lo.size)
+    weights[list(bend)] = 1.0
+
+    def least_squares(x):
+        return 0.5 * float(weights @ (x * x))
+
+    stage = cascade.bend(1, lo.copy(), hi.copy())
+    assert stage is not None
+    reference = None
+    for _ in range(10):  # (proximal steps from the last, each run of 30 at ρ = 1e-3)
+        cascade.nominal = stage if reference is None else reference
+        reference = cascade._proximal_steps(weights, np.zeros(lo.size), 1e-3, 1e-3, lo, hi)
+        assert reference is not None
+    assert least_squares(stage) <= least_squares(reference) * (1 + 1e-10), (least_squares(stage), least_squares(reference))

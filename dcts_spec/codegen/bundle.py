@@ -573,6 +573,7 @@ def generate_sources(
         "SCALE_STEP": c_double(lexicographic.SCALE_STEP),
         "BEND_STEP": c_double(lexicographic.BEND_STEP),
         "PROXIMAL_ITERATIONS": lexicographic.PROXIMAL_ITERATIONS,
+        "BACKOFF_LIMIT": c_double(lexicographic.BACKOFF_LIMIT),
         "PROXIMAL_TOLERANCE": c_double(lexicographic.PROXIMAL_TOLERANCE),
         "STATIONARY_TOLERANCE": c_double(lexicographic.STATIONARY_TOLERANCE),
         "RELAX_RETRY_STEP": c_double(lexicographic.RELAX_RETRY_STEP),

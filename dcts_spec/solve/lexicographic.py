@@ -73,6 +73,11 @@ RELAX_MARGIN = 1e-6
 # Python runtime fell back, the C one, warm, solved it), and solved it at 1e-7 and above.
 RELAX_RETRY_STEP = 1e-6
 EXTRAPOLATION_MARGIN = 1e-9
+# A step DAQP fails at the ρ of the last that worked is tried again at ten times that ρ (a better
+# conditioned Hessian, a shorter step), up to this ρ, instead of ending the stage there: a bend
+# stage ended after its first step in Python and went on in C, and the level's scaling that
+# followed parted by 4e-4 (a 26-joint Centauro, a status-"ok" golden vector).
+BACKOFF_LIMIT = 1.0
 PROXIMAL_ITERATIONS = 30
 # (1e-10 was at DAQP's resolution: 5 % of the bench's closed-loop states ran a stage's 30 QPs
 # with a variable its objective does not see moving 3e-10 each time, and no other change)
@@ -351,8 +356,9 @@ class Cascade:
         only confirm it is not run.
         A quadratic φ makes the Hessian I + diag(w)/ρ ill-conditioned for a small ρ, and DAQP then
         may fail on the thin feasible sets the levels above leave: if it does at once, ρ starts
-        again at 1 and shrinks tenfold per step down to `step`, and a later failed solve returns
-        the last iterate (feasible, and as close to the minimum as DAQP could go)."""
+        again at 1 and shrinks tenfold per step down to `step`; a later failed solve is tried
+        again at a larger ρ (`BACKOFF_LIMIT`), and past that the last iterate is the answer
+        (feasible, and as close to the minimum as DAQP could go)."""
         x = self._proximal_steps(weights, linear, step, step, lbx, ubx)
         if x is None and weights.any():
             x = self._proximal_steps(weights, linear, 1.0, step, lbx, ubx)
@@ -369,13 +375,14 @@ class Cascade:
                 hessian, hessian_rho = np.diag(1.0 + weights / rho), rho
             solved = self._solve(hessian, linear / rho - center, lbx, ubx)
             if solved is None:
-                if solved_rho is None or rho >= solved_rho:
+                if solved_rho is None or rho >= BACKOFF_LIMIT:
                     return x
                 # DAQP failed at a smaller ρ than the last that worked (it called a feasible bend
                 # stage on a barely relaxed bound infeasible at I + I/ρ of condition 100, then
                 # the iterate stopped 2 steps short and C and Python differed by 0.5 %): go on at
-                # that ρ; the proximal-point method converges at any fixed ρ, only more slowly
-                floor = rho = solved_rho
+                # that ρ, or if it failed at that ρ, at ten times it; the proximal-point method
+                # converges at any fixed ρ, only more slowly
+                floor = rho = solved_rho if rho < solved_rho else 10.0 * rho
                 continue
             solved_rho = rho
             previous, x = x, solved
