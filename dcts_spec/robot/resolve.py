@@ -18,7 +18,7 @@ from ..spec.source import SourceMap
 from ..spec.types import as_list, size_of
 from ..spec.units import to_si
 from .builtin import builtin_locked_joints, builtin_urdf_path, lock_joints
-from .model import CartesianBound, JointLimits, Robot, no_position_range
+from .model import CartesianBound, JointLimits, Robot, is_prismatic, no_position_range
 from .urdf import build_model
 
 AXIS_INDEX = {"x": 0, "y": 1, "z": 2}
@@ -100,6 +100,18 @@ def _load_model(spec: Spec, diags: list[Diagnostic]) -> tuple[pin.Model | None, 
         hint = did_you_mean(j, list(full.names)[1:], n=3)
         diags.append(src.diagnostic(("robot", "locked_joints", j), f"no joint {j!r} to lock{hint}"))
     if unknown:
+        return None, path
+    outside = False
+    for name, value in locked.items():
+        joint = full.joints[full.getJointId(name)]
+        lo, hi = full.lowerPositionLimit[joint.idx_q], full.upperPositionLimit[joint.idx_q]
+        if joint.nq == 1 and lo < hi and not lo - 1e-9 <= value <= hi + 1e-9:
+            unit = "m" if is_prismatic(joint) else "rad"
+            diags.append(src.diagnostic(("robot", "locked_joints", name),
+                                        f"{value:g} {unit} is outside {name}'s range [{lo:.6g}, {hi:.6g}] {unit} "
+                                        f"(a locked joint's position is in {unit})"))
+            outside = True
+    if outside:
         return None, path
     model = lock_joints(full, locked)
     if model.nv == 0:
