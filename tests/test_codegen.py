@@ -811,6 +811,25 @@ def test_casadi_helpers_become_macros_with_the_virtual_machines_numbers(tmp_path
 # Specs of robots the project had not seen, whose golden test once failed (the C and Python
 # runtimes parted on well-determined vectors); {urdf}: example-robot-data's robots/ folder
 UNSEEN_ROBOTS = {
+    # TIAGo Pro's torso, arms, left gripper and head (23 joints), both tools' poses above a posture:
+    # the torque limits cannot hold a dozen joint bounds in 70 of the golden states, and DAQP called
+    # the bend stage on the relaxation's sliver infeasible from a cold start and solved it from C's
+    # warm one: a vector 0.81 apart (DAQP_SETTINGS' sing_tol, RELAX_MARGIN)
+    "tiago_pro_both_tools": """version: 1
+name: tiago_pro_both_tools
+robot:
+  urdf: {urdf}/tiago_pro_description/robots/tiago_pro.urdf
+  locked_joints: {{wheel_front_left_joint: 0, wheel_front_right_joint: 0, wheel_rear_left_joint: 0, wheel_rear_right_joint: 0, gripper_right_finger_joint: 0, gripper_right_inner_finger_left_joint: 0, gripper_right_fingertip_left_joint: 0, gripper_right_inner_finger_right_joint: 0, gripper_right_fingertip_right_joint: 0, gripper_right_outer_finger_right_joint: 0}}
+limits:
+  joint_acceleration: {{max: 30}}
+tasks:
+  - {{name: left_tool, type: pose, frame: arm_left_tool_link, priority: 1, gains: {{kp: 100, kd: 20}},
+     reference: {{position: [0.5, 0.3, 0.9], rpy: [0, 1.5708, 0]}}}}
+  - {{name: right_tool, type: pose, frame: arm_right_tool_link, priority: 1, gains: {{kp: 100, kd: 20}},
+     reference: {{position: [0.5, -0.3, 0.9], rpy: [0, 1.5708, 0]}}}}
+  - {{name: posture, type: joint, priority: 2, gains: {{kp: 10, kd: 6}},
+     reference: {{q: [0.2, 0.5, -1.0, 0, -1.5, 0, 0.5, 0, 0, 0, 0, 0, 0, 0, -0.5, -1.0, 0, -1.5, 0, 0.5, 0, 0, -0.3]}}}}
+""",
     # four fingers at four priorities: after a bend, rows that see only fixed variables sit at
     # their bounds up to rounding, and DAQP called the final QP infeasible in C (its zero-row
     # check, absolute 1e-11) and not in Python: 3 vectors by up to 19 % of the torques
