@@ -246,11 +246,11 @@ def _check_tasks(spec: Spec, robot: Robot) -> list[Diagnostic]:
 def _targets_beyond_range(spec: Spec, robot: Robot, task: TaskSpec, at: tuple) -> list[Diagnostic]:
     """A joint target outside the joint's position range (a warning: the joint stops at its limit
     and the level gives way there, which may be what was meant)."""
-    ref, lim, diags = task.reference, robot.limits, []
+    ref, lim, prismatic, diags = task.reference, robot.limits, robot.prismatic, []
     for i, (name, value) in enumerate(zip(task_joints(task, robot), to_si(list(ref.q), ref.unit), strict=True)):
         j = robot.joint_names.index(name)
-        unit = "m" if robot.prismatic[j] else ref.unit
-        scale = 1.0 if robot.prismatic[j] else to_si(1.0, ref.unit)
+        unit = "m" if prismatic[j] else ref.unit
+        scale = 1.0 if prismatic[j] else to_si(1.0, ref.unit)
         lo, hi = lim.q_min[j], lim.q_max[j]
         if lo - 1e-9 <= value <= hi + 1e-9:
             continue

@@ -75,16 +75,20 @@ def _urdf_path(spec: Spec) -> Path:
     return path if path.is_absolute() else spec.base_dir / path
 
 
+def _robot_key(spec: Spec) -> KeyPath:
+    """Where the spec names its robot: `robot.model` (built-in) or `robot.urdf`."""
+    return ("robot", "model") if spec.robot.model is not None else ("robot", "urdf")
+
+
 def _load_model(spec: Spec, diags: list[Diagnostic]) -> tuple[pin.Model | None, Path]:
     src = spec.source
+    where = _robot_key(spec)
     if spec.robot.model is not None:
         path = builtin_urdf_path(spec.robot.model)
         locked = {**builtin_locked_joints(spec.robot.model), **spec.robot.locked_joints}
-        where = ("robot", "model")
     else:
         path = _urdf_path(spec)
         locked = dict(spec.robot.locked_joints)
-        where = ("robot", "urdf")
         if not path.is_file():
             diags.append(src.diagnostic(where, f"URDF file not found: {path}"))
             return None, path
@@ -159,10 +163,9 @@ def _check_moved_inertia(spec: Spec, model: pin.Model, diags: list[Diagnostic]) 
     empty = diagonal <= MOVED_INERTIA * max(1.0, float(diagonal.max()))
     if empty.any():
         names = [model.names[j] for j in range(1, model.njoints) if empty[model.joints[j].idx_v]]
-        where = ("robot", "model") if spec.robot.model is not None else ("robot", "urdf")
         joints, them = (f"joints {', '.join(names)} move", "them") if len(names) > 1 else (f"joint {names[0]} moves", "it")
         diags.append(spec.source.diagnostic(
-            where, f"{joints} no mass or inertia (every link beyond {them} is massless in the URDF), so the "
+            _robot_key(spec), f"{joints} no mass or inertia (every link beyond {them} is massless in the URDF), so the "
                    f"mass matrix is singular and no torque controller exists: lock {them} with "
                    f"robot.locked_joints, or give those links inertia"))
 
