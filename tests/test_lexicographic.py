@@ -770,6 +770,39 @@ def test_the_stages_after_a_relaxation_run_on_its_sliver():
     assert least[s] >= (1 - 1e-9) * ubx[s] and x[s] >= (1 - 1e-9) * ubx[s], (x[s] / ubx[s], least[s] / ubx[s])
 
 
+def test_a_stage_daqp_calls_infeasible_on_a_degenerate_sliver_is_solved_with_its_rows_widened():
+    """QP data of a golden state of a 27-joint Alex with hands (5 levels, first tried from
+    outside): after the relaxation and the top level's bend, the scaling stage's feasible set is
+    nearly a point, where 28 rows of rank 20 are active in 22 free variables. DAQP called that
+    stage, and every stage after it, infeasible, so the bend's iterate became the answer. The
+    lowest QP level's scaling was 0.68 in Python and 0.53 in C, with the torques equal. Each stage
+    now gets one more DAQP solve with its rows widened by 1e-10 (relative), after a relaxation.
+    The lowest QP level's bend and scaling, with the levels above as the cascade left them, then
+    match HiGHS's on the relaxed rows. HiGHS needs rows widened by 1e-8 to find any point on this
+    sliver, so the bend is allowed to be up to 1e-5 above HiGHS's value."""
+    from dcts_spec.solve.lexicographic import Cascade
+
+    args, structure = saved_qp("degenerate_stage_after_relaxation")
+    x = solve_lexicographic(*args, structure)
+    cascade = Cascade(*args, structure)
+    assert cascade.levels() is None and cascade.relax()
+    margin = 1e-8 * np.maximum(1.0, np.minimum(np.abs(cascade.lba), np.abs(cascade.uba)))
+    lbx, ubx = args[3].copy(), args[4].copy()
+    lowest = len(structure.priorities) - 1
+    above = structure.levels_above[lowest]
+    lbx[above] = ubx[above] = x[above]
+    s, bend = structure.priorities[lowest]
+    weights = np.zeros(lbx.size)
+    weights[list(bend)] = 1.0
+    least, status = solve_highs(np.zeros(lbx.size), args[2], cascade.lba - margin, cascade.uba + margin, lbx, ubx,
+                                Q=np.diag(weights))
+    assert least is not None, status
+    least_bend, bent = (float(y[list(bend)] @ y[list(bend)]) for y in (least, x))
+    assert least_bend <= bent <= least_bend * (1 + 1e-5), (bent, least_bend)
+    nominal = args[4][s]
+    assert abs(x[s] - least[s]) <= 1e-5 * nominal, (x[s] / nominal, least[s] / nominal)
+
+
 def test_a_bend_stage_goes_on_where_daqp_fails_at_its_step():
     """QP data of a golden state of a 26-joint Centauro with a run-time activation (first tried
     from outside; spare variables): the second bend level's second proximal step, at the stage's

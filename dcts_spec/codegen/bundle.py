@@ -582,6 +582,7 @@ def generate_sources(
         "MAX_EXTRAPOLATION": c_double(lexicographic.MAX_EXTRAPOLATION),
         "EXTRAPOLATION_MARGIN": c_double(lexicographic.EXTRAPOLATION_MARGIN),
         "RELAX_MARGIN": c_double(lexicographic.RELAX_MARGIN),
+        "SLIVER_WIDENING": c_double(lexicographic.SLIVER_WIDENING),
         "CONSTANT_ROW": c_double(lexicographic.CONSTANT_ROW),
         "FINISH_WEIGHTS": ", ".join(c_double(w) for w in lexicographic.FINISH_WEIGHTS),
         "MAX_STAGE_SOLVES": lexicographic.PROXIMAL_ITERATIONS,

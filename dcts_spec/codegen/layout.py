@@ -204,6 +204,7 @@ def workspace_fields(nq: int, nref: int, nx: int, na: int, nlevels: int, casadi_
         ("ramp_step", "int", 0, "steps taken along the ramp"),
         ("refactor", "int", 3, "a DAQP state's H or A changed since it factored them"),
         ("nfree", "int", 3, "the free variables of each DAQP state's last QP"),
+        ("sliver", "int", 0, "the bounds were relaxed this step: a failed QP is tried again with its rows widened"),
         ("daqp_real", "double", max(daqp_doubles, 1), "DAQP's arrays (factorizations, working sets) of every state: no heap"),
         ("daqp_int", "int", max(daqp_ints, 1), ""),
     ]

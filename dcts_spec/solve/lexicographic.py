@@ -68,6 +68,15 @@ MAX_EXTRAPOLATION = 1e6
 # (the relaxed point became the answer, as DAQP's cold start and C's warm one happened to
 # decide), at 1e-6 in 1 and 0 (with the sing_tol above).
 RELAX_MARGIN = 1e-6
+# After a relaxation, a QP DAQP fails is solved once more with its rows widened by this much
+# (relative, `FixedEliminated.widened`). Once a level is bent on the relaxed sliver, the next
+# stage's feasible set can be nearly a point where more rows are active than there are free
+# variables, and they are dependent: 28 rows of rank 20 in 22 variables on a 27-joint Alex.
+# DAQP then called that stage, and every stage after it, infeasible. The bend's iterate became
+# the answer, and C and Python parted on a level's scaling (0.53 and 0.68). Widened, the stages
+# solve: that scaling stage's answer is 1e-10 (scaled) from HiGHS's on the unwidened rows, and
+# every answer is still checked on its unwidened rows (FEASIBILITY_TOLERANCE).
+SLIVER_WIDENING = 1e-10
 # The relaxation is always feasible (every bound has its slack), so a failed first QP is DAQP's: it
 # cycled at ρ = 1e-8 on a state of a spec with the same task at two levels (golden vector: the
 # Python runtime fell back, the C one, warm, solved it), and solved it at 1e-7 and above.
@@ -194,6 +203,18 @@ class FixedEliminated:
             lower, upper = lower.copy(), upper.copy()
             lower[free.size + constant], upper[free.size + constant] = -DAQP_INF, DAQP_INF
         return cls(free, point, A_free, lower, upper, index, rows, row_norms)
+
+
+    def widened(self, relative: float) -> FixedEliminated:
+        """The same QP with every inequality row (not the variables' bounds, nor an equality)
+        widened by `relative` × max(1, |bound|) at each end."""
+        lower, upper = self.lower.copy(), self.upper.copy()
+        rows = np.arange(self.free.size, lower.size)
+        inequality = rows[lower[rows] != upper[rows]]
+        margin = relative * np.maximum(1.0, np.minimum(np.abs(lower[inequality]), np.abs(upper[inequality])))
+        lower[inequality] = np.maximum(lower[inequality] - margin, -DAQP_INF)
+        upper[inequality] = np.minimum(upper[inequality] + margin, DAQP_INF)
+        return FixedEliminated(self.free, self.point, self.A, lower, upper, self.hessian_index, self.rows, self.row_norms)
 
 
 def constant_rows(A: np.ndarray, A_free: np.ndarray) -> np.ndarray:
@@ -327,6 +348,9 @@ class Cascade:
         clip_to_daqp(ubx, upper[: ubx.size])
         qp = FixedEliminated.of(self.A, lower, upper, self._layouts)
         x, _, multipliers = daqp_qp(H, f, qp)
+        if x is None and self.relaxed_point is not None:  # (see SLIVER_WIDENING)
+            qp = qp.widened(SLIVER_WIDENING)
+            x, _, multipliers = daqp_qp(H, f, qp)
         if x is None:
             return None
         self._last_qp = qp, multipliers
