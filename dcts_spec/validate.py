@@ -374,6 +374,12 @@ def _levels(spec: Spec, robot: Robot, q: np.ndarray) -> tuple[list[LevelReport],
         level = LevelReport(p, entries, J_level.shape[0], after - before, robot.nv - before)
         levels.append(level)
         asked += level.dimension
+        if p == priorities[-1] and before == robot.nv:  # (a higher level with none left is an error below)
+            diags.append(spec.source.diagnostic(
+                spec.priority_path(p),
+                f"priority {p} gets no freedom: the higher priorities take all {robot.nv} of the robot's joint "
+                "directions, so its tasks can have no effect (give the higher priorities fewer axes, or remove "
+                "these tasks)", "warning"))
         if level.over_constrained and p != priorities[-1]:
             if asked > robot.nv:  # at every configuration, not only this one: the controller cannot be built
                 diags.append(spec.source.diagnostic(

@@ -131,6 +131,20 @@ def test_singular_task_at_initial_configuration_is_a_warning(warning_specs: tupl
     assert any(line == 6 and "'tool_position' is singular at the initial configuration" in m for line, m in warnings)
 
 
+def test_a_lowest_priority_left_no_freedom_is_a_warning(tmp_path: Path) -> None:
+    """A posture over every joint at priority 1 leaves a lower tool task nothing: it would be
+    compiled and have no effect. A warning at that priority; none where freedom is left."""
+    spec = tmp_path / "no_freedom.yaml"
+    tasks = ("  - {name: posture, type: joint, priority: 1, gains: {kp: 10, kd: 6}, reference: {q: [0, 0, 0, 0, 0, 0, 0]}}\n"
+             "  - {name: reach, type: position, frame: tool, priority: 2, gains: {kp: 10, kd: 6}, "
+             "reference: {position: [0.4, 0.1, 0.4]}}\n")
+    spec.write_text(f"version: 1\nname: no_freedom\nrobot: {{model: iiwa14}}\ntasks:\n{tasks}", encoding="utf-8")
+    assert any(line == 6 and "priority 2 gets no freedom" in m and "all 7" in m for line, m in _warnings(spec))
+    swapped = tasks.replace("priority: 1", "priority: 3").replace("priority: 2", "priority: 1")
+    spec.write_text(f"version: 1\nname: no_freedom\nrobot: {{model: iiwa14}}\ntasks:\n{swapped}", encoding="utf-8")
+    assert not any("gets no freedom" in m for _, m in _warnings(spec))
+
+
 def test_warnings_through_the_cli(warning_specs: tuple[Path, Path]) -> None:
     widened, singular = warning_specs
     result = dcts("validate", str(widened), str(singular))
