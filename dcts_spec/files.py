@@ -4,7 +4,10 @@ A command builds its output in a staging folder, then `install` moves it into pl
 new output has replace their namesakes, entries the previous dcts output had (listed in its
 OWNED file) and the new one lacks go, and everything else in the folder (a user's notes, their
 main.c) stays. A folder that exists, is not empty and has no OWNED file was not made by dcts:
-`check_writable` refuses it before any work is done.
+`check_writable` refuses it before any work is done. OWNED lists every path dcts wrote, to the
+files inside its subfolders, so `install` also refuses (and leaves the folder as it was) where
+the new output would replace a user's file: one with the name of a new entry (a summary.json
+of their own in a bundle folder), or one added inside a folder dcts wrote (firmware/my_main.c).
 """
 
 from __future__ import annotations
@@ -15,7 +18,7 @@ import shutil
 import time
 from pathlib import Path
 
-OWNED = ".dcts-owned"  # JSON list of the top-level names dcts wrote
+OWNED = ".dcts-owned"  # JSON: {"entries": top-level names, "paths": every path below them} dcts wrote
 # A staging folder this old was left by a run that was killed (SIGKILL, a power cut): a live run
 # finishes its staging in minutes, and a younger one may belong to a run still going.
 STALE_STAGING_SECONDS = 3600.0
@@ -27,11 +30,50 @@ class OutputFolderError(Exception):
     """The output folder cannot be written without touching files dcts did not write."""
 
 
-def owned_names(folder: Path) -> set[str]:
+def _owned(folder: Path) -> dict | list | None:
     try:
-        return set(json.loads((folder / OWNED).read_text()))
+        return json.loads((folder / OWNED).read_text())
     except (OSError, ValueError):
-        return set()
+        return None
+
+
+def owned_names(folder: Path) -> set[str]:
+    """The top-level names dcts wrote into `folder`."""
+    owned = _owned(folder)
+    if isinstance(owned, dict):
+        return set(owned.get("entries", []))
+    return set(owned) if isinstance(owned, list) else set()
+
+
+def owned_paths(folder: Path) -> set[str] | None:
+    """Every path (relative, '/'-separated) dcts wrote into `folder`; None where its OWNED file
+    predates this list (a plain list of top-level names: their subfolders count as dcts's)."""
+    owned = _owned(folder)
+    return set(owned.get("paths", [])) if isinstance(owned, dict) else None
+
+
+def _paths(root: Path) -> list[str]:
+    """The paths of every file and folder below `root`, relative to it."""
+    return sorted(p.relative_to(root).as_posix() for p in root.rglob("*"))
+
+
+def _users_files(folder: Path, names: set[str]) -> list[str]:
+    """The paths among `folder`'s entries `names` (and below them) that dcts did not write. None
+    in a folder with no OWNED file (an output of a dcts from before it, which the command
+    recognized): its entries count as dcts's, as they did then."""
+    if _owned(folder) is None:
+        return []
+    entries, paths = owned_names(folder), owned_paths(folder)
+    users = []
+    for name in sorted(names):
+        path = folder / name
+        if not (path.exists() or path.is_symlink()):
+            continue
+        if name not in entries:
+            users.append(name)
+        elif paths is not None and path.is_dir() and not path.is_symlink():
+            users += [f"{name}/{p}" for p in _paths(path) if f"{name}/{p}" not in paths]
+    return users
 
 
 def check_writable(folder: Path, allow_unmarked=lambda folder: False) -> None:
@@ -65,11 +107,18 @@ def install(staging: Path, folder: Path) -> None:
         raise SystemExit(128 + _stop_signal)
     staging, folder = Path(staging), Path(folder)
     new = sorted(p.name for p in staging.iterdir() if p.name != OWNED)
-    (staging / OWNED).write_text(json.dumps(new) + "\n")
+    paths = [p for p in _paths(staging) if p != OWNED]
+    (staging / OWNED).write_text(json.dumps({"entries": new, "paths": paths}) + "\n")
     if not folder.exists():
         staging.rename(folder)
         return
     old = owned_names(folder)
+    users = _users_files(folder, old | set(new))
+    if users:
+        shown = ", ".join(users[:5]) + (f" and {len(users) - 5} more" if len(users) > 5 else "")
+        raise OutputFolderError(f"{folder} has files dcts did not write where this output goes ({shown}): nothing "
+                                "was changed; move them, or choose another output folder (dcts never deletes or "
+                                "overwrites files it did not write)")
     trash = folder.parent / f".{folder.name}.{secrets.token_hex(6)}.old"
     trash.mkdir()
     moved: list[str] = []

@@ -199,6 +199,37 @@ def test_atomic_directory_replaces_its_own_files_and_keeps_the_users(tmp_path: P
     assert [p.name for p in users.iterdir()] == ["important.txt"]
 
 
+def test_atomic_directory_never_overwrites_a_users_file_where_its_output_goes(tmp_path: Path) -> None:
+    """A user's file with the name of a new entry, or added inside a folder dcts wrote: refused,
+    and the folder is left as it was (both were overwritten or deleted: another command's
+    summary.json, a main.c added to a bundle's firmware/)."""
+    out = tmp_path / "out"
+    with atomic_directory(out) as staging:
+        (staging / "firmware").mkdir()
+        (staging / "firmware" / "startup.c").write_text("dcts")
+    (out / "firmware" / "my_main.c").write_text("mine")
+    with pytest.raises(OutputFolderError, match="firmware/my_main.c"):
+        with atomic_directory(out) as staging:
+            (staging / "firmware").mkdir()
+    assert (out / "firmware" / "my_main.c").read_text() == "mine" and (out / "firmware" / "startup.c").is_file()
+    (out / "firmware" / "my_main.c").unlink()
+    (out / "summary.json").write_text("mine")
+    with pytest.raises(OutputFolderError, match="summary.json"):
+        with atomic_directory(out) as staging:
+            (staging / "summary.json").write_text("dcts")
+    assert (out / "summary.json").read_text() == "mine" and (out / "firmware" / "startup.c").is_file()
+    with atomic_directory(out) as staging:  # its own files (all of firmware/) it replaces
+        (staging / "log.npz").write_text("dcts")
+    assert sorted(p.name for p in out.iterdir()) == [OWNED, "log.npz", "summary.json"]
+    (out / OWNED).write_text('["log.npz"]')  # an OWNED file from before the paths were listed
+    (out / "log.npz").unlink()
+    (out / "log.npz").mkdir()
+    (out / "log.npz" / "inside").write_text("")
+    with atomic_directory(out) as staging:  # (its folders count as dcts's, as they did)
+        (staging / "log.npz").write_text("dcts")
+    assert (out / "log.npz").read_text() == "dcts"
+
+
 def test_empty_log_has_a_summary(case) -> None:
     spec, robot, _, _ = case
     log = SimulationLog.allocate(0, 7, 3, 3, 0.001)

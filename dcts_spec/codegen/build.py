@@ -475,5 +475,7 @@ def compile_bundle(
         _remove_created(created)
         if isinstance(exc, OSError):
             raise CodegenError(f"writing the bundle failed: {exc}") from None
+        if isinstance(exc, OutputFolderError):  # (a user's file where the bundle goes: found by install)
+            raise CodegenError(str(exc)) from None
         raise
     return report
