@@ -142,7 +142,7 @@ def test_campaign_names_checked_against_the_spec(spec_file, tmp_path) -> None:
     assert result.exit_code == 1
     assert f"{campaign}:18:" in result.stderr and "'tool_position.kq' is not a run-time parameter" in result.stderr
     assert f"{campaign}:19:" in result.stderr and "leave the allowed range [0, 1e+08]" in result.stderr
-    assert not (tmp_path / "out" / "samples.jsonl").exists()
+    assert not (tmp_path / "out").exists()  # (it held campaign.json, and the fixed campaign was refused there)
 
 
 def test_samples_are_drawn_from_seed_and_index_alone() -> None:

@@ -45,9 +45,9 @@ class ResultsFolder:
     def samples_file(self) -> Path:
         return self.folder / SAMPLES
 
-    def open(self) -> dict[int, dict[str, Any]]:
-        """Check the folder, record the campaign (or check it is the recorded one) and return
-        the rows already finished, by sample index."""
+    def check(self) -> None:
+        """Raise if the campaign cannot go into the folder (a folder dcts did not write, another
+        output, another campaign): writes nothing, so that the inputs' own checks come first."""
         check_writable(self.folder)
         state_file = self.folder / STATE
         if state_file.is_file():
@@ -55,6 +55,12 @@ class ResultsFolder:
         elif owned_names(self.folder):
             raise OutputFolderError(f"{self.folder} holds another dcts output (no {STATE}): choose another output "
                                     "folder for the campaign")
+
+    def open(self) -> dict[int, dict[str, Any]]:
+        """Check the folder, record the campaign (or check it is the recorded one) and return
+        the rows already finished, by sample index."""
+        self.check()
+        state_file = self.folder / STATE
         self.folder.mkdir(parents=True, exist_ok=True)
         (self.folder / OWNED).write_text(json.dumps(sorted(NAMES)) + "\n")
         state_file.write_text(json.dumps(self.state, indent=2) + "\n")

@@ -86,11 +86,12 @@ class CampaignSession:
         if metric is not None and metric not in allowed:
             raise UnknownMetric(f"--optimize: unknown metric {metric!r}{did_you_mean(metric, allowed)}; allowed: "
                                 f"{', '.join(allowed)}")
-        self.rows = self.folder.open()
+        self.folder.check()
         phase(f"building the C controller{'s' if len(self._bundles()) > 1 else ''} (once)")
         for formulation, mass_scale in self._bundles():
             self.driver.bundle(formulation, mass_scale)
         check_parameters(self.driver)
+        self.rows = self.folder.open()  # (only now: a campaign refused above leaves no folder)
         self.pool: Pool | None = None
         self.parameters: dict[str, Any] | None = None  # the optimizer's best, for the campaign's rows
         self._stack = ExitStack()  # the Ray session, once a pool is wanted
