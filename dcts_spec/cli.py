@@ -212,23 +212,36 @@ def validate(
 @command()
 def schema(
     out: Annotated[Optional[Path], typer.Option("--out", "-o", help="write the schema to this file instead of "
-                                                "printing it")] = None,
+                                                "printing it (a file there is replaced only if it is a dcts "
+                                                "schema)")] = None,
     output: OldOutput = None,
 ) -> None:
     """Print (or write) the JSON Schema of the spec language."""
-    from .spec.schema import spec_json_schema_text
+    from .spec.schema import SCHEMA_ID, spec_json_schema_text
 
     text = spec_json_schema_text()
     out = out or output
     if out is None:
         typer.echo(text, nl=False)
         return
+    if out.exists() and not _is_our_schema(out, SCHEMA_ID):
+        typer.echo(f"error: {out} exists and is not a dcts schema: refusing to overwrite it (dcts schema replaces only "
+                   "a schema it wrote); choose another file", err=True)
+        raise typer.Exit(1)
     try:
         out.write_text(text, encoding="utf-8")
     except OSError as error:
         typer.echo(f"error: cannot write {out}: {error.strerror}", err=True)
         raise typer.Exit(1) from None
     typer.echo(f"wrote {out}")
+
+
+def _is_our_schema(path: Path, schema_id: str) -> bool:
+    """Is `path` a JSON Schema dcts wrote (any version: its $id)?"""
+    try:
+        return path.is_file() and json.loads(path.read_text(encoding="utf-8")).get("$id") == schema_id
+    except (OSError, ValueError, AttributeError):
+        return False
 
 
 @command()

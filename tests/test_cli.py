@@ -120,6 +120,21 @@ def test_schema_out_and_its_old_spelling(tmp_path: Path) -> None:
         assert json.loads(path.read_text())["title"]
 
 
+def test_schema_replaces_a_schema_and_no_other_file(tmp_path: Path) -> None:
+    """`schema -o` over an older schema rewrites it; over a spec (or any other file), it refuses
+    with exit 1 and the file keeps its content (a spec was overwritten)."""
+    schema = tmp_path / "schema.json"
+    schema.write_text(json.dumps({"$id": "https://dcts.dev/schemas/dcts-spec.schema.json", "title": "old"}))
+    assert invoke("schema", "-o", str(schema)).exit_code == 0
+    assert json.loads(schema.read_text())["title"] != "old"
+    for other, text in (("spec.yaml", "version: 1\nname: mine\n"), ("notes.json", '{"mine": 1}')):
+        path = tmp_path / other
+        path.write_text(text)
+        result = invoke("schema", "-o", str(path))
+        assert result.exit_code == 1 and "refusing to overwrite" in result.stderr, result.output
+        assert path.read_text() == text
+
+
 def test_compile_defaults_to_build_name(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     spec = short_spec(tmp_path)
     monkeypatch.chdir(tmp_path)
