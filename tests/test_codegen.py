@@ -970,3 +970,31 @@ tasks:
 """)
     report = compile_bundle(spec, tmp_path / "bundle", golden_count=24)
     assert report.manifest["built"] and "golden vectors" in report.manifest["host"]["test_summary"]
+
+
+def test_a_one_joint_arm_with_a_least_squares_posture_builds(tmp_path):
+    """A UR5 with 5 joints locked (first tried from outside): a 1-D orientation at priority 1
+    takes the one joint, and the posture below is solved in least squares with no variable left
+    after the levels'. gcc -O2 called the loops of the unbounded solution over those (none)
+    undefined behaviour (-Werror=aggressive-loop-optimizations), and the bundle did not build."""
+    from dcts_spec.robot.builtin import example_robot_data_dir
+
+    urdf = example_robot_data_dir() / "ur_description" / "urdf" / "ur5_robot.urdf"
+    spec = tmp_path / "one_joint.yaml"
+    spec.write_text(f"""version: 1
+name: one_joint
+robot:
+  urdf: {urdf}
+  locked_joints: {{shoulder_pan_joint: 0, shoulder_lift_joint: -1.57, wrist_1_joint: -1.57, wrist_2_joint: -1.57,
+                  wrist_3_joint: 0}}
+limits:
+  joint_acceleration: {{max: 5}}
+  cartesian:
+    - {{frame: tool0, axis: z, min: 0.3}}
+tasks:
+  - {{name: spin, type: orientation, frame: tool0, axes: [ry], priority: 1, gains: {{kp: 20, kd: 9}},
+     reference: {{rpy: [0, 90, 0], unit: deg}}}}
+  - {{name: hold, type: joint, priority: 2, gains: {{kp: 10, kd: 6}}, reference: {{q: [1.5]}}}}
+""")
+    report = compile_bundle(spec, tmp_path / "bundle", golden_count=24)
+    assert report.manifest["built"] and "golden vectors" in report.manifest["host"]["test_summary"]
