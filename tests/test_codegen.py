@@ -952,49 +952,33 @@ tasks:
     assert f"{len(golden['compared_on_command'])} compared on tau and ddq only" in report.manifest["host"]["test_summary"]
 
 
-def test_a_two_joint_robot_builds_and_passes_its_golden_test(tmp_path):
-    """The bundle's own test poked joints 1 and 2 with non-finite inputs: for a robot of 1 or 2
-    joints it did not compile (-Werror=array-bounds), so no such robot could be compiled."""
-    from dcts_spec.robot.builtin import example_robot_data_dir
-
-    urdf = example_robot_data_dir() / "double_pendulum_description" / "urdf" / "double_pendulum.urdf"
-    spec = tmp_path / "pendulum.yaml"
-    spec.write_text(f"""version: 1
-name: pendulum
-robot:
-  urdf: {urdf}
-limits:
-  joint_torque: {{max: 5}}
-tasks:
-  - {{name: posture, type: joint, priority: 1, gains: {{kp: 10, kd: 6}}, reference: {{q: [0.5, -0.5]}}}}
-""")
-    report = compile_bundle(spec, tmp_path / "bundle", golden_count=24)
-    assert report.manifest["built"] and "golden vectors" in report.manifest["host"]["test_summary"]
-
-
-def test_a_one_joint_arm_with_a_least_squares_posture_builds(tmp_path):
-    """A UR5 with 5 joints locked (first tried from outside): a 1-D orientation at priority 1
-    takes the one joint, and the posture below is solved in least squares with no variable left
-    after the levels'. gcc -O2 called the loops of the unbounded solution over those (none)
-    undefined behaviour (-Werror=aggressive-loop-optimizations), and the bundle did not build."""
-    from dcts_spec.robot.builtin import example_robot_data_dir
-
-    urdf = example_robot_data_dir() / "ur_description" / "urdf" / "ur5_robot.urdf"
-    spec = tmp_path / "one_joint.yaml"
-    spec.write_text(f"""version: 1
-name: one_joint
-robot:
-  urdf: {urdf}
-  locked_joints: {{shoulder_pan_joint: 0, shoulder_lift_joint: -1.57, wrist_1_joint: -1.57, wrist_2_joint: -1.57,
-                  wrist_3_joint: 0}}
-limits:
-  joint_acceleration: {{max: 5}}
+SMALL_ROBOTS = {
+    # The bundle's own test poked joints 1 and 2 with non-finite inputs: for a robot of 1 or 2
+    # joints it did not compile (-Werror=array-bounds), so no such robot could be compiled.
+    "pendulum": ("double_pendulum_description/urdf/double_pendulum.urdf", "", "  joint_torque: {max: 5}", """
+  - {name: posture, type: joint, priority: 1, gains: {kp: 10, kd: 6}, reference: {q: [0.5, -0.5]}}"""),
+    # A UR5 with 5 joints locked (first tried from outside): a 1-D orientation at priority 1 takes
+    # the one joint, and the posture below is solved in least squares with no variable left after
+    # the levels'. gcc -O2 called the loops of the unbounded solution over those (none) undefined
+    # behaviour (-Werror=aggressive-loop-optimizations), and the bundle did not build.
+    "one_joint": ("ur_description/urdf/ur5_robot.urdf", """
+  locked_joints: {shoulder_pan_joint: 0, shoulder_lift_joint: -1.57, wrist_1_joint: -1.57, wrist_2_joint: -1.57,
+                  wrist_3_joint: 0}""", """  joint_acceleration: {max: 5}
   cartesian:
-    - {{frame: tool0, axis: z, min: 0.3}}
-tasks:
-  - {{name: spin, type: orientation, frame: tool0, axes: [ry], priority: 1, gains: {{kp: 20, kd: 9}},
-     reference: {{rpy: [0, 90, 0], unit: deg}}}}
-  - {{name: hold, type: joint, priority: 2, gains: {{kp: 10, kd: 6}}, reference: {{q: [1.5]}}}}
-""")
+    - {frame: tool0, axis: z, min: 0.3}""", """
+  - {name: spin, type: orientation, frame: tool0, axes: [ry], priority: 1, gains: {kp: 20, kd: 9},
+     reference: {rpy: [0, 90, 0], unit: deg}}
+  - {name: hold, type: joint, priority: 2, gains: {kp: 10, kd: 6}, reference: {q: [1.5]}}"""),
+}
+
+
+@pytest.mark.parametrize("name", sorted(SMALL_ROBOTS))
+def test_a_robot_of_one_or_two_joints_builds_and_passes_its_golden_test(name, tmp_path):
+    from dcts_spec.robot.builtin import example_robot_data_dir
+
+    urdf, locked, limits, tasks = SMALL_ROBOTS[name]
+    spec = tmp_path / f"{name}.yaml"
+    spec.write_text(f"version: 1\nname: {name}\nrobot:\n  urdf: {example_robot_data_dir() / urdf}{locked}\n"
+                    f"limits:\n{limits}\ntasks:{tasks}\n")
     report = compile_bundle(spec, tmp_path / "bundle", golden_count=24)
     assert report.manifest["built"] and "golden vectors" in report.manifest["host"]["test_summary"]
