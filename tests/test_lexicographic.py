@@ -834,3 +834,50 @@ def test_a_bend_stage_goes_on_where_daqp_fails_at_its_step():
         reference = cascade._proximal_steps(weights, np.zeros(lo.size), 1e-3, 1e-3, lo, hi)
         assert reference is not None
     assert least_squares(stage) <= least_squares(reference) * (1 + 1e-10), (least_squares(stage), least_squares(reference))
+
+
+def _final_objective_gap(name: str) -> float:
+    """A saved QP's answer against HiGHS's least ½xᵀHx + fᵀx with every level fixed at the
+    answer's values (on the relaxed rows, if the cascade relaxes): relative excess."""
+    from dcts_spec.solve.lexicographic import Cascade
+
+    args, structure = saved_qp(name)
+    H, f, A, lbx, ubx = args[:5]
+    x = solve_lexicographic(*args, structure)
+    cascade = Cascade(*args, structure)
+    if cascade.levels() is None:
+        assert cascade.relax()
+    levels = structure.levels_above[len(structure.priorities)]
+    lbx, ubx = lbx.copy(), ubx.copy()
+    lbx[levels] = ubx[levels] = x[levels]
+    least, status = solve_highs(f, A, cascade.lba, cascade.uba, lbx, ubx, Q=H)
+    assert least is not None, status
+
+    def objective(v):
+        return 0.5 * v @ H @ v + f @ v
+
+    return (objective(x) - objective(least)) / abs(objective(least))
+
+
+@pytest.mark.parametrize("name", ["activation_final_qp", "activation_final_qp_relaxed"])
+def test_with_a_run_time_activation_the_final_qp_is_solved(name):
+    """QP data of two golden states of a 26-joint Centauro whose priority-1 hand has a run-time
+    activation (first tried from outside; its freedom is N_k z, spare variables). The final QP
+    (the least-squares posture over what the levels leave) was called infeasible by DAQP, and the
+    lowest level's scaling point became the answer: 10 Nm and 5.8 Nm from the same spec without
+    the activation, 2.5 % and 4.3 % above the least objective. A joint the levels above fix kept
+    free coefficients of ~1e-12 in its acceleration bound, crossed by rounding (CONSTANT_ROW), and
+    the first state's final QP has a feasible point, the scaling's, so DAQP's failure gets a
+    widened retry (SLIVER_WIDENING)."""
+    assert abs(_final_objective_gap(name)) <= 1e-9
+
+
+def test_a_final_qp_with_a_feasible_point_gets_a_widened_retry(monkeypatch):
+    """The first state above with rows of free coefficients ~1e-12 left in DAQP's QP (the old
+    CONSTANT_ROW): DAQP fails its final QP, and the retry with the rows widened by 1e-10 solves it."""
+    from dcts_spec.solve import lexicographic
+
+    monkeypatch.setattr(lexicographic, "CONSTANT_ROW", 1e-12)
+    assert abs(_final_objective_gap("activation_final_qp")) <= 1e-9
+    monkeypatch.setattr(lexicographic.FixedEliminated, "widened", lambda qp, relative: qp)
+    assert _final_objective_gap("activation_final_qp") > 1e-3

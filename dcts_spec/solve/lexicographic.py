@@ -68,14 +68,18 @@ MAX_EXTRAPOLATION = 1e6
 # (the relaxed point became the answer, as DAQP's cold start and C's warm one happened to
 # decide), at 1e-6 in 1 and 0 (with the sing_tol above).
 RELAX_MARGIN = 1e-6
-# After a relaxation, a QP DAQP fails is solved once more with its rows widened by this much
-# (relative, `FixedEliminated.widened`). Once a level is bent on the relaxed sliver, the next
-# stage's feasible set can be nearly a point where more rows are active than there are free
-# variables, and they are dependent: 28 rows of rank 20 in 22 variables on a 27-joint Alex.
-# DAQP then called that stage, and every stage after it, infeasible. The bend's iterate became
-# the answer, and C and Python parted on a level's scaling (0.53 and 0.68). Widened, the stages
-# solve: that scaling stage's answer is 1e-10 (scaled) from HiGHS's on the unwidened rows, and
-# every answer is still checked on its unwidened rows (FEASIBILITY_TOLERANCE).
+# A QP DAQP fails is solved once more with its rows widened by this much (relative,
+# `FixedEliminated.widened`) after a relaxation, and where the caller has a point of its feasible
+# set (a proximal stage's steps after its first; the final QPs after the lowest level's scaling).
+# Once a level is bent on the relaxed sliver, the next stage's feasible set can be nearly a point
+# where more rows are active than there are free variables, and they are dependent: 28 rows of
+# rank 20 in 22 variables on a 27-joint Alex. DAQP then called that stage, and every stage after
+# it, infeasible; the bend's iterate became the answer, and C and Python parted on a level's
+# scaling (0.53 and 0.68). Widened, the stages solve: that scaling stage's answer is 1e-10
+# (scaled) from HiGHS's on the unwidened rows, and every answer is still checked on its unwidened
+# rows (FEASIBILITY_TOLERANCE). Not for every QP: a stage infeasible by a hair (a level that
+# cannot be met) would then be feasible, and 943 of the bench spec's 3,000 closed-loop states
+# changed, by up to 46 Nm.
 SLIVER_WIDENING = 1e-10
 # The relaxation is always feasible (every bound has its slack), so a failed first QP is DAQP's: it
 # cycled at ρ = 1e-8 on a state of a spec with the same task at two levels (golden vector: the
@@ -108,8 +112,13 @@ FEASIBILITY_TOLERANCE = 1e-7
 # to max(1, |bound|) (rad/s² or m/s²): over a 1 ms period ~5e-13 m or rad of position.
 BOUND_TOLERANCE = 1e-6
 # A row of a QP with fixed variables eliminated whose free coefficients are at most this times its
-# largest one sees no free variable (FixedEliminated): its rounding residue is ~1e-16.
-CONSTANT_ROW = 1e-12
+# largest one sees no free variable (FixedEliminated): its rounding residue is ~1e-16 with a null
+# space basis, but up to ~1e-12 with a run-time activation's N_k z (N_k is formed from products of
+# larger entries). At 1e-12, the acceleration bound of a joint the levels above fix kept free
+# coefficients of 1.6e-12 and was crossed by 2.9e-10 through rounding; DAQP then called the
+# final QP infeasible, and the lowest level's least squares was not applied (a 26-joint Centauro:
+# 5.8 Nm from the same spec without the activation).
+CONSTANT_ROW = 1e-10
 # A stage's answer is certified optimal (`stationary`) if its KKT residual on DAQP's active rows is
 # at most this much of the stage's gradient: rounding leaves ~1e-15, an iterate still moving more.
 STATIONARY_TOLERANCE = 1e-10
@@ -341,14 +350,15 @@ class Cascade:
         clip_to_daqp(self.lba, self._lower[nx:])
         clip_to_daqp(self.uba, self._upper[nx:])
 
-    def _solve(self, H, f, lbx, ubx) -> np.ndarray | None:
-        """One QP with the variable bounds lbx/ubx: DAQP's answer, if it holds on its own rows."""
+    def _solve(self, H, f, lbx, ubx, feasible: bool = False) -> np.ndarray | None:
+        """One QP with the variable bounds lbx/ubx: DAQP's answer, if it holds on its own rows.
+        `feasible`: the caller has a point of this QP's feasible set (see SLIVER_WIDENING)."""
         lower, upper = self._lower, self._upper
         clip_to_daqp(lbx, lower[: lbx.size])
         clip_to_daqp(ubx, upper[: ubx.size])
         qp = FixedEliminated.of(self.A, lower, upper, self._layouts)
         x, _, multipliers = daqp_qp(H, f, qp)
-        if x is None and self.relaxed_point is not None:  # (see SLIVER_WIDENING)
+        if x is None and (feasible or self.relaxed_point is not None):  # (see SLIVER_WIDENING)
             qp = qp.widened(SLIVER_WIDENING)
             x, _, multipliers = daqp_qp(H, f, qp)
         if x is None:
@@ -397,7 +407,7 @@ class Cascade:
         for _ in range(PROXIMAL_ITERATIONS):
             if rho != hessian_rho:  # (ρ stays at `step` once there: the same Hessian)
                 hessian, hessian_rho = np.diag(1.0 + weights / rho), rho
-            solved = self._solve(hessian, linear / rho - center, lbx, ubx)
+            solved = self._solve(hessian, linear / rho - center, lbx, ubx, feasible=x is not None)
             if solved is None:
                 if solved_rho is None or rho >= BACKOFF_LIMIT:
                     return x
@@ -510,7 +520,7 @@ class Cascade:
                 return x
             linear = -(self.H @ x)
             linear[s] -= weight
-            moved = self._solve(self.H, linear, lbx, ubx)
+            moved = self._solve(self.H, linear, lbx, ubx, feasible=True)
             if moved is not None and self._negligible(moved - x, x):
                 return x
             checked = x
@@ -537,7 +547,7 @@ class Cascade:
         lo[s] = hi[s] = min(max(scaled[s], lbx[s]), ubx[s])
         if self.structure.spare_variables and self._nominal_through(level + 1, lo, hi):
             return scaled  # every level nominal: the first QP of `levels`, which was infeasible
-        final = self._solve(self.H, self.f, lo, hi)
+        final = self._solve(self.H, self.f, lo, hi, feasible=True)
         return scaled if final is None else final
 
     def levels(self) -> np.ndarray | None:
