@@ -227,7 +227,9 @@ def _check_tasks(spec: Spec, robot: Robot) -> list[Diagnostic]:
             continue
         unknown = [j for j in task_joints(task, robot) if j not in robot.joint_names]
         for j in unknown:
-            diags.append(src.diagnostic(at + ("joints",), f"no joint {j!r}{did_you_mean(j, robot.joint_names, 3)}; joints: {', '.join(robot.joint_names)}"))
+            why = (" (it is locked in robot.locked_joints: a task cannot move it)" if j in spec.robot.locked_joints
+                   else did_you_mean(j, robot.joint_names, 3))
+            diags.append(src.diagnostic(at + ("joints",), f"no joint {j!r}{why}; joints: {', '.join(robot.joint_names)}"))
         if unknown:
             continue
         dim = task_dimension(task, robot)
@@ -305,6 +307,12 @@ def _check_scenario(spec: Spec, robot: Robot) -> list[Diagnostic]:
                 diags.append(src.diagnostic(where + ("body",), f"no link or frame {d.body!r}{frame_candidates(d.body, frames, spec)}"))
         elif len(d.torque) != n:
             diags.append(src.diagnostic(where + ("torque",), f"{len(d.torque)} values for {n} joints"))
+    late = [(("disturbances", i, "start"), "this push starts", d.start) for i, d in enumerate(sc.disturbances)]
+    late += [(("parameters", i, "time"), "this parameter change comes", c.time) for i, c in enumerate(sc.parameters)]
+    for where, what, time in late:
+        if time >= sc.duration:
+            diags.append(src.diagnostic(at + where, f"{what} at {time:g} s, not before the run ends "
+                                        f"(scenario.duration: {sc.duration:g} s): it has no effect", "warning"))
     for i, p in enumerate(sc.payloads):
         if not robot.has_frame(p.frame):
             diags.append(src.diagnostic(at + ("payloads", i, "frame"), f"no frame {p.frame!r}{frame_candidates(p.frame, frames, spec)}"))

@@ -288,3 +288,28 @@ def test_summary_words_cartesian_bounds_like_the_run_summary(tmp_path: Path) -> 
     summary = validate_file(spec).summary()
     bounds = [line.strip() for line in summary.splitlines() if "tool." in line]
     assert bounds == ["0.05 m ≤ tool.z", "tool.x ≤ 0.9 m", "-0.5 m ≤ tool.y ≤ 0.5 m"]
+
+
+def test_a_push_or_parameter_change_after_the_run_ends_is_a_warning(tmp_path: Path) -> None:
+    """A push starting at 5 s of a 1 s run, and a parameter change at 5 s, had no effect and
+    validated silently."""
+    spec = tmp_path / "late.yaml"
+    spec.write_text("""version: 1
+name: late
+robot: {model: iiwa14}
+tasks:
+  - {name: posture, type: joint, priority: 1, gains: {kp: 10, kd: 6}, reference: {q: [0, 0, 0, 0, 0, 0, 0]}}
+parameters:
+  tasks: {posture: [kp]}
+scenario:
+  duration: 1.0
+  disturbances:
+    - {type: force, body: link7, force: [10, 0, 0], start: 5.0, duration: 0.2}
+    - {type: force, body: link7, force: [10, 0, 0], start: 0.5, duration: 0.2}
+  parameters:
+    - {time: 5.0, values: {posture.kp: 20}}
+""", encoding="utf-8")
+    warnings = _warnings(spec)
+    assert any(line == 11 and "push starts at 5 s, not before the run ends" in m for line, m in warnings), warnings
+    assert any(line == 14 and "parameter change comes at 5 s" in m for line, m in warnings), warnings
+    assert not any(line == 12 for line, _ in warnings)

@@ -203,7 +203,7 @@ class ControllerSweep(StrictModel):
         None, description="a formulation, or {choice: [...]} / {grid: [...]}", examples=[{"grid": ["dcts", "osc"]}])
     parameters: dict[str, Value | list[Value]] = Field(
         default_factory=dict, description="run-time parameter (as the bundle names it: ee_position.kp, "
-        "posture.reference, ...) to a value, or one value per component; SI units",
+        "ee_position.position, posture.q, ...) to a value, or one value per component; SI units",
         examples=[{"ee_position.kp": {"loguniform": [100, 1000]}}])
 
 

@@ -107,7 +107,8 @@ class ParameterLayout:
                     raise ParameterError(e.name, f"{v}{where} is not finite")
                 if v < lo or (e.lower_open and v == lo) or v > hi:
                     side = "(" if e.lower_open else "["
-                    raise ParameterError(e.name, f"{v:g} {e.unit}{where} is outside {side}{lo:g}, {hi:g}]"
+                    value = f"{v:g} {e.unit}" if e.unit else f"{v:g}"
+                    raise ParameterError(e.name, f"{value}{where} is outside {side}{lo:g}, {hi:g}]"
                                          + (" (the compiled envelope)" if _is_limit(e) else ""))
         for i, j in self.order:
             if not values[i] < values[j]:

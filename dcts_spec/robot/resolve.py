@@ -90,7 +90,8 @@ def _load_model(spec: Spec, diags: list[Diagnostic]) -> tuple[pin.Model | None, 
         path = _urdf_path(spec)
         locked = dict(spec.robot.locked_joints)
         if not path.is_file():
-            diags.append(src.diagnostic(where, f"URDF file not found: {path}"))
+            message = f"{path} is a folder, not a URDF file" if path.is_dir() else f"URDF file not found: {path}"
+            diags.append(src.diagnostic(where, message))
             return None, path
     try:
         with _quiet_stderr():  # urdfdom prints its parser's complaint itself; the diagnostic says it
@@ -272,7 +273,8 @@ def _outside(values: np.ndarray, urdf: np.ndarray, mask: np.ndarray, unit: str, 
         diags.append(src.diagnostic(path, f"{what} ({listed}), widened on purpose: allow_outside_urdf", "warning"))
     else:
         diags.append(
-            src.diagnostic(path, f"{what} ({listed}); narrow it, or set allow_outside_urdf: true to widen on purpose")
+            src.diagnostic(path, f"{what} ({listed}); narrow it, or set allow_outside_urdf: true in "
+                                 f"{'.'.join(map(str, path[:-1]))} to widen on purpose")
         )
 
 
