@@ -772,6 +772,19 @@ def test_bench_runs(tmp_path):
     assert "Pinocchio" in text and "qp_data" in text
 
 
+def test_closed_loop_states_start_inside_the_cartesian_bounds(tmp_path):
+    """`dcts bench` times states along closed-loop motions from random starts. A start outside a
+    Cartesian bound makes every step until the robot is back inside a relaxed one: on a Kinova
+    spec with three Cartesian bounds, 1,655 of 2,000 closed-loop states were (first tried from
+    outside). The starts are drawn inside the bounds."""
+    spec = tmp_path / "floor.yaml"
+    spec.write_text(MINIMAL.read_text().replace("name: minimal", "name: floor").replace(
+        "  joint_torque: {max: 100}\n", "  joint_torque: {max: 100}\n  cartesian:\n    - {frame: tool, axis: z, min: 0.6}\n"))
+    sampler = StateSampler(build_controller(spec), seed=0)
+    assert sum(not sampler.inside_cartesian_bounds(sampler.random().q) for _ in range(50)) >= 10
+    assert all(sampler.inside_cartesian_bounds(sampler.start().q) for _ in range(20))
+
+
 def test_casadi_helpers_become_macros_with_the_virtual_machines_numbers(tmp_path):
     """patch_casadi_source turns CasADi's sq and fabs calls into macros: the compiled function gives
     what CasADi's virtual machine (the Python runtime) gives, NaN, ±inf and ±0 included."""

@@ -98,6 +98,25 @@ class StateSampler:
         q = self.random_q()
         return State(q, self.random_dq(), self.random_tau_ext(), self.reference(q), "random")
 
+    def inside_cartesian_bounds(self, q: np.ndarray) -> bool:
+        """Are the frames of every Cartesian bound within it at q?"""
+        bounds = self.controller.robot.cartesian_bounds
+        if not bounds:
+            return True
+        pin.framesForwardKinematics(self.model, self.data, q)
+        return all(b.c_min <= b.coordinate(self.data.oMf[self.model.getFrameId(b.frame)].translation) <= b.c_max
+                   for b in bounds)
+
+    def start(self, tries: int = 200) -> State:
+        """A random state with the Cartesian bounds' frames inside them, where a motion starts (from
+        outside, every step until the robot is back inside is a relaxed one); after `tries`
+        draws, the last."""
+        for _ in range(tries):
+            state = self.random()
+            if self.inside_cartesian_bounds(state.q):
+                break
+        return state
+
     def near_limit(self) -> State:
         """A joint close to a position bound and moving toward it: the limit rows bind."""
         q = self.random_q()
@@ -207,8 +226,8 @@ def trajectory_states(controller: Controller, count: int, seed: int = 0, episode
                       step=None) -> list[State]:
     """States along closed-loop motions: the robot's forward dynamics under the controller's torque
     and the external torque, integrated over `controller.spec.controller.period` (semi-implicit
-    Euler) from random starts, with external torque pulses and, for run-time references, jumps.
-    `step(q, dq, tau_ext, ref)` returns the StepResult (default: the Python runtime, which is
+    Euler) from random starts inside the Cartesian bounds, with external torque pulses and, for
+    run-time references, jumps. `step(q, dq, tau_ext, ref)` returns the StepResult (default: the Python runtime, which is
     slow; pass a compiled controller's step).
     """
     sampler = StateSampler(controller, seed)
@@ -217,7 +236,7 @@ def trajectory_states(controller: Controller, count: int, seed: int = 0, episode
     step = step or controller.step
     states: list[State] = []
     while len(states) < count:
-        start = sampler.random()
+        start = sampler.start()
         q, dq, ref = start.q, start.dq * 0.2, start.ref
         tau_ext = np.zeros(sampler.n)
         pulse_end = -1
