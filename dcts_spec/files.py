@@ -16,6 +16,7 @@ import json
 import secrets
 import shutil
 import time
+from fnmatch import fnmatch
 from pathlib import Path
 
 OWNED = ".dcts-owned"  # JSON: {"entries": top-level names, "paths": every path below them} dcts wrote
@@ -57,23 +58,24 @@ def _paths(root: Path) -> list[str]:
     return sorted(p.relative_to(root).as_posix() for p in root.rglob("*"))
 
 
-def _users_files(folder: Path, names: set[str]) -> list[str]:
-    """The paths among `folder`'s entries `names` (and below them) that dcts did not write. None
-    in a folder with no OWNED file (an output of a dcts from before it, which the command
-    recognized): its entries count as dcts's, as they did then."""
+def _users_files(folder: Path, names: set[str], regenerated: tuple[str, ...]) -> list[str]:
+    """The paths among `folder`'s entries `names` (and below them) that dcts did not write, other
+    than those matching a `regenerated` pattern (fnmatch). None in a folder with no OWNED file (an
+    output of a dcts from before it, which the command recognized): its entries count as dcts's,
+    as they did then."""
     if _owned(folder) is None:
         return []
     entries, paths = owned_names(folder), owned_paths(folder)
-    users = []
+    candidates = []
     for name in sorted(names):
         path = folder / name
         if not (path.exists() or path.is_symlink()):
             continue
         if name not in entries:
-            users.append(name)
+            candidates.append(name)
         elif paths is not None and path.is_dir() and not path.is_symlink():
-            users += [f"{name}/{p}" for p in _paths(path) if f"{name}/{p}" not in paths]
-    return users
+            candidates += [f"{name}/{p}" for p in _paths(path) if f"{name}/{p}" not in paths]
+    return [p for p in candidates if not any(fnmatch(p, pattern) for pattern in regenerated)]
 
 
 def check_writable(folder: Path, allow_unmarked=lambda folder: False) -> None:
@@ -100,9 +102,11 @@ def stop_signal() -> int | None:
     return _stop_signal
 
 
-def install(staging: Path, folder: Path) -> None:
+def install(staging: Path, folder: Path, regenerated: tuple[str, ...] = ()) -> None:
     """Move the finished `staging` folder's entries into `folder` (see the module docstring);
-    after `request_stop`, raise SystemExit instead (the caller removes its staging folder)."""
+    after `request_stop`, raise SystemExit instead (the caller removes its staging folder).
+    `regenerated`: patterns (fnmatch, relative paths) of what the output's own tools make and
+    remake, which it may replace though dcts did not write them (a bundle's `make` products)."""
     if _stop_signal is not None:
         raise SystemExit(128 + _stop_signal)
     staging, folder = Path(staging), Path(folder)
@@ -113,7 +117,7 @@ def install(staging: Path, folder: Path) -> None:
         staging.rename(folder)
         return
     old = owned_names(folder)
-    users = _users_files(folder, old | set(new))
+    users = _users_files(folder, old | set(new), regenerated)
     if users:
         shown = ", ".join(users[:5]) + (f" and {len(users) - 5} more" if len(users) > 5 else "")
         raise OutputFolderError(f"{folder} has files dcts did not write where this output goes ({shown}): nothing "

@@ -442,6 +442,17 @@ def test_compiling_again_keeps_the_files_a_user_added_to_the_bundle(tmp_path):
     compile_bundle(MINIMAL, out, build=False)
     assert (out / "my_main.c").read_text().startswith("int main")
     assert "stale" not in (out / "minimal.h").read_text()  # dcts' own file is replaced
+    # what the bundle's `make` built since (here by hand) a built bundle replaces; a user's file
+    # inside a folder dcts wrote is refused, and nothing changes
+    (out / "build" / "other-compiler").mkdir(parents=True)
+    (out / "build" / "other-compiler" / "minimal.o").write_text("")
+    (out / "libminimal.so").write_text("")
+    compile_bundle(MINIMAL, out)
+    assert not (out / "build" / "other-compiler").exists() and (out / "libminimal.so").stat().st_size > 0
+    (out / "firmware" / "my_startup.c").write_text("mine")
+    with pytest.raises(CodegenError, match="firmware/my_startup.c"):
+        compile_bundle(MINIMAL, out, build=False)
+    assert (out / "firmware" / "my_startup.c").read_text() == "mine" and (out / "my_main.c").is_file()
 
 
 def test_cli_compile(tmp_path):

@@ -233,6 +233,13 @@ def section_size(path: Path, section: str = ".text") -> int:
     return 0
 
 
+def make_products(name: str) -> tuple[str, ...]:
+    """What the bundle's Makefile builds and `make clean` removes (templates/Makefile.in): a
+    compile into the folder replaces them, whoever ran `make`."""
+    return ("build", "build/*", f"lib{name}.so", *(f"{name}_test{suffix}" for suffix in ("", "_heap", "_nomalloc", "_asan")),
+            "firmware/*.elf", "firmware/*.map", "firmware/*.size", "firmware/size.txt")
+
+
 def _golden_summary(output: str) -> str:
     return next((line.strip() for line in output.splitlines() if GOLDEN_SUMMARY in line), "")
 
@@ -469,7 +476,7 @@ def compile_bundle(
         if target == "cortex-m7":
             report.firmware = manifest["cortex_m7"] = build_firmware(tmp, manifest, qemu=qemu, timeout=build_timeout)
         (tmp / "manifest.json").write_text(json.dumps(manifest, indent=2) + "\n")
-        install(tmp, out_dir)  # (files a user added to an older bundle stay)
+        install(tmp, out_dir, make_products(manifest["name"]))  # (files a user added to an older bundle stay)
     except BaseException as exc:
         shutil.rmtree(tmp, ignore_errors=True)
         _remove_created(created)
