@@ -70,7 +70,9 @@ MAX_EXTRAPOLATION = 1e6
 RELAX_MARGIN = 1e-6
 # A QP DAQP fails is solved once more with its rows widened by this much (relative,
 # `FixedEliminated.widened`) after a relaxation, and where the caller has a point of its feasible
-# set (a proximal stage's steps after its first; the final QPs after the lowest level's scaling).
+# set and no other way on (the final QPs after the lowest level's scaling; a proximal stage's
+# failed step already backs off: a retry there too made the torques of 6 of an xArm7 spec's 126
+# golden states move with rounding-level changes of their data).
 # Once a level is bent on the relaxed sliver, the next stage's feasible set can be nearly a point
 # where more rows are active than there are free variables, and they are dependent: 28 rows of
 # rank 20 in 22 variables on a 27-joint Alex. DAQP then called that stage, and every stage after
@@ -212,7 +214,6 @@ class FixedEliminated:
             lower, upper = lower.copy(), upper.copy()
             lower[free.size + constant], upper[free.size + constant] = -DAQP_INF, DAQP_INF
         return cls(free, point, A_free, lower, upper, index, rows, row_norms)
-
 
     def widened(self, relative: float) -> FixedEliminated:
         """The same QP with every inequality row (not the variables' bounds, nor an equality)
@@ -407,7 +408,7 @@ class Cascade:
         for _ in range(PROXIMAL_ITERATIONS):
             if rho != hessian_rho:  # (ρ stays at `step` once there: the same Hessian)
                 hessian, hessian_rho = np.diag(1.0 + weights / rho), rho
-            solved = self._solve(hessian, linear / rho - center, lbx, ubx, feasible=x is not None)
+            solved = self._solve(hessian, linear / rho - center, lbx, ubx)
             if solved is None:
                 if solved_rho is None or rho >= BACKOFF_LIMIT:
                     return x
