@@ -277,7 +277,7 @@ def stationary(qp: FixedEliminated, multipliers: np.ndarray, gradient: np.ndarra
     if active.size > g.size:  # (dependent rows)
         return False
     C = qp.rows[active]
-    mu = _cholesky_solve((C @ C.T).tolist(), (-(C @ g)).tolist())
+    mu = _cholesky_solve(C @ C.T, -(C @ g))
     if mu is None:
         return False
     inequality = qp.lower[active] != qp.upper[active]
@@ -289,11 +289,23 @@ def stationary(qp: FixedEliminated, multipliers: np.ndarray, gradient: np.ndarra
     return math.sqrt(residual.dot(residual)) <= STATIONARY_TOLERANCE * size
 
 
-def _cholesky_solve(G: list[list[float]], b: list[float]) -> np.ndarray | None:
-    """x with G x = b for a small symmetric G, by its Cholesky factor (None if a pivot is not
-    positive), in plain Python as `ctl_stationary` does it: NumPy's Cholesky and solve cost ~15 µs
-    each on the 2–6 rows a certificate has, these loops a few µs."""
+# Up to this many active rows the certificate's Cholesky runs in plain Python, as ctl_stationary
+# does it: NumPy's Cholesky and solve cost ~15 µs each on the 2–6 rows a stage's certificate has,
+# the loops a few µs. They grow as k³ in the interpreter: the relaxation's stages of a 27-joint
+# robot hold ~50 rows active, and there the loops took 3/4 of a compile (its golden vectors).
+PLAIN_CHOLESKY_ROWS = 12
+
+
+def _cholesky_solve(G: np.ndarray, b: np.ndarray) -> np.ndarray | None:
+    """x with G x = b for a symmetric G, by its Cholesky factor (None if a pivot is not positive)."""
     k = len(b)
+    if k > PLAIN_CHOLESKY_ROWS:
+        try:
+            low = np.linalg.cholesky(G)
+        except np.linalg.LinAlgError:
+            return None
+        return np.linalg.solve(low.T, np.linalg.solve(low, b))
+    G, b = G.tolist(), b.tolist()
     for j in range(k):
         pivot = G[j][j] - sum(G[j][c] * G[j][c] for c in range(j))
         if not pivot > 0.0:
