@@ -319,6 +319,25 @@ def test_nonfinite_inputs_give_the_fallback(built, three_levels_spec, where):
     np.testing.assert_allclose(result.tau, expected.tau, rtol=1e-12, atol=1e-12)
 
 
+@pytest.mark.parametrize("speed", [1e30, 1e154, -1e300])
+def test_an_impossible_velocity_reading_gives_the_fallback_with_gravity(built, three_levels_spec, speed):
+    """A finite but impossible velocity (a sensor fault): the QP data overflow and the fallback
+    applies. That velocity counts as 0 there, as a non-finite one does: the torque is the one at
+    rest on that joint. At 1e154 rad/s the C fallback's Coriolis term overflowed and five of the
+    iiwa14's seven torques were zeroed, its gravity compensation lost (first tried from outside)."""
+    _, compiled = built
+    controller = build_controller(three_levels_spec)
+    s = StateSampler(controller, seed=4).random()
+    dq = np.zeros(controller.n)
+    dq[0] = speed
+    compiled.reset()
+    result = compiled.step(s.q, dq, np.zeros(controller.n), s.ref)
+    assert result.status < 0
+    at_rest = controller.fallback_torque(s.q, np.zeros(controller.n))
+    np.testing.assert_allclose(result.tau, at_rest, rtol=1e-12, atol=1e-12)
+    assert np.abs(at_rest).max() > 1.0  # (gravity: not zero)
+
+
 def test_torque_always_within_limits(built, three_levels_spec):
     """Extreme states (limits hit hard, huge external torques): finite torque within the limits."""
     _, compiled = built
