@@ -16,7 +16,7 @@ from dcts_spec.codegen import bench as bench_module
 from dcts_spec.codegen import compile_bundle
 from dcts_spec.codegen import CodegenError
 from dcts_spec.codegen import bundle as bundle_module
-from dcts_spec.codegen.flags import C_WARNINGS, HOST_OPTIMIZATION, QP_DATA_O0_FROM, QP_DATA_O1_FROM, qp_data_optimization
+from dcts_spec.codegen.flags import C_WARNINGS, DAQP_OPTIMIZATION, HOST_OPTIMIZATION, QP_DATA_O0_FROM, QP_DATA_O1_FROM, qp_data_optimization
 
 
 @pytest.fixture(scope="module")
@@ -33,6 +33,9 @@ def test_makefile_and_cmake_ship_the_flags(sources: Path) -> None:
     cmake = (sources / "CMakeLists.txt").read_text()
     assert shlex.split(re.search(r'set\(CMAKE_C_FLAGS_RELEASE (".*")\)', cmake).group(1)) == [" ".join(HOST_OPTIMIZATION)]
     assert "-march=native" not in HOST_OPTIMIZATION and "-ffast-math" not in HOST_OPTIMIZATION
+    # DAQP as its Python package builds it, by both (CMake built it with the Release flags alone)
+    assert re.search(r"^DAQP_FLAGS = (.*)$", makefile, re.M).group(1).split() == list(DAQP_OPTIMIZATION)
+    assert f'"$<$<CONFIG:Release>:{";".join(DAQP_OPTIMIZATION)}>"' in cmake
 
 
 def test_bench_harness_builds_like_the_makefile(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:

@@ -23,6 +23,7 @@ import numpy as np
 
 from ..controller import (ACTIVE_TOLERANCE, DATA_OUTPUTS, STATE_TOLERANCE, STATUS_LIMITS_RELAXED, TORQUE_TOLERANCE,
                           Controller)
+from ..formulations import fallback
 from ..formulations.qp import BOUNDS, HARD
 from ..parameter_ramp import ramp_steps
 from ..solve import BOUND_TOLERANCE, DAQP_SETTINGS
@@ -32,7 +33,7 @@ from .layout import (C_DATA_OUTPUTS, array_lengths, casadi_work_lengths, daqp_st
                      workspace_struct)
 from .datasheet import (conventions_text, fmt_list, gains_text, limits_text, model_texts, parameters_doc_text,
                         parameters_struct, parameters_text, ref_layout_text, sizes_text, status_text, timing_text)
-from .flags import (C_WARNINGS, HOST_OPTIMIZATION, MAX_QP_DATA_OPERATIONS, QP_DATA_O0_FROM, QP_DATA_O1_FROM,
+from .flags import (C_WARNINGS, DAQP_OPTIMIZATION, HOST_OPTIMIZATION, MAX_QP_DATA_OPERATIONS, QP_DATA_O0_FROM, QP_DATA_O1_FROM,
                     flags_text, qp_data_optimization)
 from .model import model_record
 from .spec_copy import copy_spec
@@ -538,7 +539,7 @@ def generate_sources(
         daqp_note = " (closed-form law: no QP solver)"
     values = {
         "PARAMETERS": parameters_text(controller, big),
-        "STATUS_LIST": status_text(name, big),
+        "STATUS_LIST": status_text(name, big, bool(controller.ref_size)),
         "CONVENTIONS": conventions_text(controller),
         "GAINS": gains_text(controller),
         "LIMITS": limits_text(controller),
@@ -586,6 +587,8 @@ def generate_sources(
         "CONSTANT_ROW": c_double(lexicographic.CONSTANT_ROW),
         "FINISH_WEIGHTS": ", ".join(c_double(w) for w in lexicographic.FINISH_WEIGHTS),
         "MAX_STAGE_SOLVES": lexicographic.PROXIMAL_ITERATIONS,
+        "VELOCITY_CAP": f"{fallback.VELOCITY_CAP:g}",
+        "UNBOUNDED_VELOCITY_CAP": f"{fallback.UNBOUNDED_VELOCITY_CAP:g}",
         "WORKSPACE_FIELDS": header_fields(fields),
         "HARD_END": qp.rows_of(HARD).stop if qp is not None else 0,
         "BOUNDS_END": (qp.rows_of(HARD).stop + nr) if qp is not None else 0,
@@ -611,6 +614,8 @@ def generate_sources(
         "DAMPING_ARRAY": c_array(damping),
         "NEEDS_DAQP": int(nx > 0),
         "HOST_OPTIMIZATION": flags_text(HOST_OPTIMIZATION),
+        "DAQP_OPTIMIZATION": flags_text(DAQP_OPTIMIZATION),
+        "DAQP_OPTIMIZATION_CMAKE": ";".join(DAQP_OPTIMIZATION),
         "QP_DATA_OPTIMIZATION": flags_text(qp_data_optimization(work["instructions"])),
         "QP_DATA_OPERATIONS": work["instructions"],
         "QP_DATA_O1_FROM": QP_DATA_O1_FROM,

@@ -308,14 +308,15 @@ def parameters_struct(controller: Controller, big: str) -> tuple[str, str]:
 # -- statuses, model, timing -----------------------------------------------------------------------
 
 
-def status_text(name: str, big: str) -> str:
+def status_text(name: str, big: str, takes_ref: bool) -> str:
     rows = [
         ("0", "OK", "every torque limit and joint/Cartesian bound holds (checked after the solve)"),
         ("1", "LIMITS_RELAXED", "a joint/Cartesian bound is crossed (those in info->relaxed): the torque"),
         ("", "", "limits cannot hold it, and it is violated as little as they allow (tasks"),
         ("", "", "come after); or the state is already beyond its position or velocity limit"),
         ("", "", "(after a push), and the bound brings it back"),
-        ("-1", "NONFINITE_INPUT", "an input was NaN or infinite"),
+        ("-1", "NONFINITE_INPUT", "an input was NaN or infinite" + (" (or ref NULL: the controller takes one)"
+                                                                      if takes_ref else "")),
         ("-2", "SOLVER_FAILED", "the QP solver failed (also on non-finite QP data)"),
         ("-3", "INVALID_OUTPUT", "the solution was not finite or broke a torque limit"),
         ("-4", "NOT_INITIALIZED", f"{name}_init was not called or failed"),
