@@ -227,3 +227,16 @@ def test_prismatic_joint_in_m_and_n(tmp_path):
     assert re.search(r"q\[2\]\s+joint positions \(rad, m for a prismatic joint\)", header)
     assert re.search(r"task posture, velocity \(rad/s: posture\.shoulder; m/s: posture\.slide\)", header)
     assert re.search(r"within \|tau\| <= tau_max = \[20, 50\] \(Nm, N for a prismatic joint\)", header)
+
+
+def test_header_lists_the_locked_joints_the_firmware_holds(sheet, tmp_path):
+    """A locked joint is not in q: the header says which, and where the model has them (a Baxter
+    bundle's head and fingers appeared only in its spec.yaml). None for a robot with none."""
+    spec = tmp_path / "locked.yaml"
+    spec.write_text("version: 1\nname: locked\nrobot:\n  model: iiwa14\n  locked_joints: {joint7: 0.3, joint5: -0.2}\n"
+                    "tasks:\n  - {name: reach, type: position, frame: tool, priority: 1, gains: {kp: 10, kd: 6}, "
+                    "reference: {position: [0.5, 0, 0.5]}}\n")
+    compile_bundle(spec, tmp_path / "bundle", build=False)
+    header = re.sub(r"\n \* +", " ", (tmp_path / "bundle" / "locked.h").read_text())  # (wrapped lines joined)
+    assert re.search(r"Locked +not in q: hold them there yourself .*: joint7 at 0\.3, joint5 at -0\.2\.", header)
+    assert "Locked " not in sheet[1]

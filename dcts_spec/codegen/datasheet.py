@@ -16,6 +16,7 @@ from ..formulations.parameters import ParameterInput
 from ..parameter_ramp import ramp_steps
 from ..limits.joint import DEFAULT_BRAKING
 from ..limits.naming import interval_text, joint_unit
+from ..robot.builtin import builtin_locked_joints
 from ..tasks import JointTask, Task
 from ..tasks.base import unit_text
 from .model import describe_changes
@@ -107,7 +108,26 @@ def conventions_text(controller: Controller) -> str:
         " *   Cartesian  positions, plane normals and offsets in the world frame (the URDF's root),",
         " *              m; orientations as roll, pitch, yaw in rad, R = Rz(yaw) Ry(pitch) Rx(roll).",
         f" *   Period     {controller.spec.controller.period:g} s: the limits are shaped for it; call the step at this rate.",
+        *locked_text(controller),
     ])
+
+
+def locked_joints(controller: Controller) -> dict[str, float]:
+    """The robot's joints the controller does not command (the spec's locked_joints, a built-in
+    robot's own), with the positions its model has them at (rad or m)."""
+    robot = controller.spec.robot
+    return {**(builtin_locked_joints(robot.model) if robot.model is not None else {}), **robot.locked_joints}
+
+
+def locked_text(controller: Controller) -> list[str]:
+    """The Conventions lines on the locked joints: not in q, and held by the firmware."""
+    locked = locked_joints(controller)
+    if not locked:
+        return []
+    listed = ", ".join(f"{name} at {value:g}" for name, value in locked.items())
+    return textwrap.wrap(f"not in q: hold them there yourself (the model has them fixed; rad or m): {listed}.",
+                         100, initial_indent=" *   Locked     ", subsequent_indent=" *              ",
+                         break_long_words=False, break_on_hyphens=False)
 
 
 def sizes_text(controller: Controller, levels: int, nr: int, npls: int, workspace_bytes: int) -> str:
