@@ -19,7 +19,7 @@ import numpy as np
 
 from .buffered_function import BufferedFunction
 from .formulations import FORMULATIONS, ControlLaw, ControlProblem, build_problem
-from .formulations.fallback import fallback_torque
+from .formulations.fallback import fallback_torque, plausible_velocity
 from .formulations.hierarchy import OverConstrainedLevel
 from .formulations.parameters import ParameterLayout
 from .formulations.qp import BOUNDS
@@ -160,6 +160,7 @@ class Controller:
         fallback = fallback_torque(self.problem)
         p = self.problem
         self.fallback_function = ca.Function("fallback", [p.q, p.dq, p.param], [fallback], ["q", "dq", "param"], ["tau"])
+        self._plausible_velocity = plausible_velocity(robot.limits.v_max)
         self.tau_max = np.asarray(robot.limits.tau_max, dtype=float)  # as compiled (the envelope)
         self.reset_params()
         # the joints whose torque limit is a run-time parameter, and where it is in `param`
@@ -288,12 +289,12 @@ class Controller:
 
     def fallback_torque(self, q: np.ndarray, dq: np.ndarray, param: np.ndarray | None = None) -> np.ndarray:
         """The stable damping of `formulations/fallback.py` at q (else the last finite q), clipped to
-        the torque limits; non-finite velocities count as 0. `param`: the parameter values (default:
-        those of the last step)."""
+        the torque limits; non-finite and implausible velocities count as 0. `param`: the parameter
+        values (default: those of the last step)."""
         param = self._ramp.now if param is None else param
         if np.all(np.isfinite(q)):
             self._last_q = q
-        dq = np.where(np.isfinite(dq), dq, 0.0)
+        dq = np.where(np.isfinite(dq) & (np.abs(dq) <= self._plausible_velocity), dq, 0.0)
         if self._last_q is None:
             return np.zeros(self.n)
         tau = np.array(self.fallback_function(self._last_q, dq, param)).ravel()

@@ -610,6 +610,7 @@ def generate_sources(
         "TORQUE_TOLERANCE": c_double(TORQUE_TOLERANCE),
         "DAQP_SETTINGS": daqp_settings_code(settings),
         "TAU_MAX_ARRAY": c_array(tau_max),
+        "PLAUSIBLE_VELOCITY": c_array(fallback.plausible_velocity(controller.robot.limits.v_max)),
         **_parameter_values(controller, name, big),
         "DAMPING_ARRAY": c_array(damping),
         "NEEDS_DAQP": int(nx > 0),
