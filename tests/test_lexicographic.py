@@ -472,14 +472,19 @@ def test_a_stage_stops_when_only_noise_moves(monkeypatch):
     assert _rel(x, _converged(monkeypatch, args, structure)) < 1e-8
 
 
-def test_the_relaxation_is_solved_where_daqp_cycles_at_its_first_step():
-    """QP data of a golden state of a spec with the same tool position at two priorities (the
-    lower one least squares): even the top level's bend is infeasible, and DAQP cycled (exit -2)
-    on the relaxation's first QP at ρ = 1e-8. The Python runtime fell back while the C one, from
-    a warm start, solved it. Again at a gentler step, the relaxation's Σσ is HiGHS's least."""
+@pytest.mark.parametrize("name", ["relaxation_cycles", "relaxation_needs_a_gentle_step"])
+def test_the_relaxation_is_solved_where_daqp_fails_at_its_first_steps(name):
+    """relaxation_cycles: QP data of a golden state of a spec with the same tool position at two
+    priorities (the lower one least squares): even the top level's bend is infeasible, and DAQP
+    cycled (exit -2) on the relaxation's first QP at ρ = 1e-8. The Python runtime fell back while
+    the C one, from a warm start, solved it. relaxation_needs_a_gentle_step: a UR5 state 0.0005
+    rad beyond the elbow's limit (first tried from outside, 1 in 100k random states): DAQP said
+    "optimal" with a slack at −6e6, below its bound of 0, at ρ = 1e-8, and at −27.5 at 1e-6; both
+    runtimes fell back (status −2). At the next, gentler step that solves, the relaxation's Σσ is
+    HiGHS's least."""
     from dcts_spec.solve.lexicographic import Cascade
 
-    args, structure = saved_qp("relaxation_cycles")
+    args, structure = saved_qp(name)
     cascade = Cascade(*args, structure)
     assert cascade.levels() is None and cascade.relax()
     assert solve_lexicographic(*args, structure) is not None

@@ -577,7 +577,7 @@ def generate_sources(
         "BACKOFF_LIMIT": c_double(lexicographic.BACKOFF_LIMIT),
         "PROXIMAL_TOLERANCE": c_double(lexicographic.PROXIMAL_TOLERANCE),
         "STATIONARY_TOLERANCE": c_double(lexicographic.STATIONARY_TOLERANCE),
-        "RELAX_RETRY_STEP": c_double(lexicographic.RELAX_RETRY_STEP),
+        "RELAX_STEPS": ", ".join(c_double(step) for step in lexicographic.RELAX_STEPS),
         "SPARE_VARIABLES": int(controller.law.spare_variables),
         "FEASIBILITY_TOLERANCE": c_double(lexicographic.FEASIBILITY_TOLERANCE),
         "MAX_EXTRAPOLATION": c_double(lexicographic.MAX_EXTRAPOLATION),

@@ -83,10 +83,14 @@ RELAX_MARGIN = 1e-6
 # cannot be met) would then be feasible, and 943 of the bench spec's 3,000 closed-loop states
 # changed, by up to 46 Nm.
 SLIVER_WIDENING = 1e-10
-# The relaxation is always feasible (every bound has its slack), so a failed first QP is DAQP's: it
-# cycled at ρ = 1e-8 on a state of a spec with the same task at two levels (golden vector: the
-# Python runtime fell back, the C one, warm, solved it), and solved it at 1e-7 and above.
-RELAX_RETRY_STEP = 1e-6
+# The relaxation is always feasible (every bound has its slack), so a failure is DAQP's, and the
+# stage is run again at the next, gentler step. DAQP cycled at ρ = 1e-8 on a state of a spec with
+# the same task at two levels (golden vector: the Python runtime fell back, the C one, warm,
+# solved it), and solved it at 1e-7 and above. On a UR5 state 0.0005 rad beyond the elbow's limit
+# and up to 1.14 × the velocity limits, it answered "optimal" with a slack at −6e6 (below its
+# bound of 0) at ρ = 1e-8 and at −27.5 at 1e-6, the step fell back (status −2, first tried from
+# outside: 1 in 100k random states), and it solves at 1e-4.
+RELAX_STEPS = (SCALE_STEP, 1e-6, 1e-4, 1e-2, 1.0)
 EXTRAPOLATION_MARGIN = 1e-9
 # A step DAQP fails at the ρ of the last that worked is tried again at ten times that ρ (a better
 # conditioned Hessian, a shorter step), up to this ρ, instead of ending the stage there: a bend
@@ -678,9 +682,11 @@ class Cascade:
                         Structure(range(0), (), self.structure.spare_variables))
         slack.nominal = np.concatenate([self.nominal, np.zeros(r)])
         linear = np.concatenate([np.zeros(nx), np.ones(r)])
-        x = slack._proximal(np.zeros(nx + r), linear, SCALE_STEP, slack.lbx, slack.ubx)
-        if x is None:  # (it is feasible: DAQP failed, e.g. cycled, at that step) a gentler one
-            x = slack._proximal(np.zeros(nx + r), linear, RELAX_RETRY_STEP, slack.lbx, slack.ubx)
+        x = None
+        for step in RELAX_STEPS:  # (see RELAX_STEPS)
+            x = slack._proximal(np.zeros(nx + r), linear, step, slack.lbx, slack.ubx)
+            if x is not None:
+                break
         if x is None:
             return False
         self.relaxed_point = x[:nx]
