@@ -578,6 +578,7 @@ def generate_sources(
         "PROXIMAL_TOLERANCE": c_double(lexicographic.PROXIMAL_TOLERANCE),
         "STATIONARY_TOLERANCE": c_double(lexicographic.STATIONARY_TOLERANCE),
         "RELAX_STEPS": ", ".join(c_double(step) for step in lexicographic.RELAX_STEPS),
+        "RELAX_TRIES": len(lexicographic.RELAX_STEPS),
         "SPARE_VARIABLES": int(controller.law.spare_variables),
         "FEASIBILITY_TOLERANCE": c_double(lexicographic.FEASIBILITY_TOLERANCE),
         "MAX_EXTRAPOLATION": c_double(lexicographic.MAX_EXTRAPOLATION),
