@@ -38,19 +38,22 @@ def _owned(folder: Path) -> dict | list | None:
         return None
 
 
-def owned_names(folder: Path) -> set[str]:
-    """The top-level names dcts wrote into `folder`."""
-    owned = _owned(folder)
+def _names(owned: dict | list | None) -> set[str]:
+    """The top-level names of an OWNED file's contents."""
     if isinstance(owned, dict):
         return set(owned.get("entries", []))
     return set(owned) if isinstance(owned, list) else set()
 
 
-def owned_paths(folder: Path) -> set[str] | None:
-    """Every path (relative, '/'-separated) dcts wrote into `folder`; None where its OWNED file
+def _paths_of(owned: dict | list | None) -> set[str] | None:
+    """Every path (relative, '/'-separated) of an OWNED file's contents; None where the file
     predates this list (a plain list of top-level names: their subfolders count as dcts's)."""
-    owned = _owned(folder)
     return set(owned.get("paths", [])) if isinstance(owned, dict) else None
+
+
+def owned_names(folder: Path) -> set[str]:
+    """The top-level names dcts wrote into `folder`."""
+    return _names(_owned(folder))
 
 
 def _paths(root: Path) -> list[str]:
@@ -58,14 +61,14 @@ def _paths(root: Path) -> list[str]:
     return sorted(p.relative_to(root).as_posix() for p in root.rglob("*"))
 
 
-def _users_files(folder: Path, names: set[str], regenerated: tuple[str, ...]) -> list[str]:
-    """The paths among `folder`'s entries `names` (and below them) that dcts did not write, other
-    than those matching a `regenerated` pattern (fnmatch). None in a folder with no OWNED file (an
-    output of a dcts from before it, which the command recognized): its entries count as dcts's,
-    as they did then."""
-    if _owned(folder) is None:
+def _users_files(folder: Path, owned: dict | list | None, names: set[str], regenerated: tuple[str, ...]) -> list[str]:
+    """The paths among `folder`'s entries `names` (and below them) that dcts did not write (`owned`:
+    its OWNED file's contents), other than those matching a `regenerated` pattern (fnmatch). None
+    in a folder with no OWNED file (an output of a dcts from before it, which the command
+    recognized): its entries count as dcts's, as they did then."""
+    if owned is None:
         return []
-    entries, paths = owned_names(folder), owned_paths(folder)
+    entries, paths = _names(owned), _paths_of(owned)
     candidates = []
     for name in sorted(names):
         path = folder / name
@@ -116,8 +119,9 @@ def install(staging: Path, folder: Path, regenerated: tuple[str, ...] = ()) -> N
     if not folder.exists():
         staging.rename(folder)
         return
-    old = owned_names(folder)
-    users = _users_files(folder, old | set(new), regenerated)
+    owned = _owned(folder)
+    old = _names(owned)
+    users = _users_files(folder, owned, old | set(new), regenerated)
     if users:
         shown = ", ".join(users[:5]) + (f" and {len(users) - 5} more" if len(users) > 5 else "")
         raise OutputFolderError(f"{folder} has files dcts did not write where this output goes ({shown}): nothing "

@@ -16,7 +16,7 @@ from ..formulations.parameters import ParameterInput
 from ..parameter_ramp import ramp_steps
 from ..limits.joint import DEFAULT_BRAKING
 from ..limits.naming import interval_text, joint_unit
-from ..robot.builtin import builtin_locked_joints
+from ..robot.resolve import locked_joints
 from ..tasks import JointTask, Task
 from ..tasks.base import unit_text
 from .model import describe_changes
@@ -112,16 +112,9 @@ def conventions_text(controller: Controller) -> str:
     ])
 
 
-def locked_joints(controller: Controller) -> dict[str, float]:
-    """The robot's joints the controller does not command (the spec's locked_joints, a built-in
-    robot's own), with the positions its model has them at (rad or m)."""
-    robot = controller.spec.robot
-    return {**(builtin_locked_joints(robot.model) if robot.model is not None else {}), **robot.locked_joints}
-
-
 def locked_text(controller: Controller) -> list[str]:
     """The Conventions lines on the locked joints: not in q, and held by the firmware."""
-    locked = locked_joints(controller)
+    locked = locked_joints(controller.spec)
     if not locked:
         return []
     listed = ", ".join(f"{name} at {value:g}" for name, value in locked.items())

@@ -227,8 +227,8 @@ def trajectory_states(controller: Controller, count: int, seed: int = 0, episode
     """States along closed-loop motions: the robot's forward dynamics under the controller's torque
     and the external torque, integrated over `controller.spec.controller.period` (semi-implicit
     Euler) from random starts inside the Cartesian bounds, with external torque pulses and, for
-    run-time references, jumps. `step(q, dq, tau_ext, ref)` returns the StepResult (default: the Python runtime, which is
-    slow; pass a compiled controller's step).
+    run-time references, jumps. `step(q, dq, tau_ext, ref)` returns the StepResult (default: the
+    Python runtime, which is slow; pass a compiled controller's step).
     """
     sampler = StateSampler(controller, seed)
     rng = sampler.rng

@@ -18,7 +18,7 @@ import pinocchio as pin
 from ..spec import load_spec
 from .builtin import BUILTIN_ROBOTS, builtin_locked_joints, builtin_urdf_path, load_builtin_model
 from .model import JointLimits, is_prismatic
-from .resolve import _quiet_stderr, resolve_robot
+from .resolve import _quiet_stderr, locked_joints, resolve_robot
 from .urdf import build_model
 
 FRAME_KINDS = {pin.FrameType.BODY: "link", pin.FrameType.JOINT: "joint", pin.FrameType.FIXED_JOINT: "fixed joint",
@@ -143,8 +143,8 @@ def describe(target: str) -> RobotDescription:
         return _description(path.stem, "URDF file", path, model, JointLimits.of_model(model), {})
     spec = load_spec(path)
     robot, _ = resolve_robot(spec)
-    locked = {**(builtin_locked_joints(spec.robot.model) if spec.robot.model else {}), **spec.robot.locked_joints}
-    return _description(robot.name, f"the robot of {path}", robot.urdf_path, robot.model, robot.limits, locked)
+    return _description(robot.name, f"the robot of {path}", robot.urdf_path, robot.model, robot.limits,
+                        locked_joints(spec))
 
 
 def _load_urdf(path: Path) -> pin.Model:

@@ -80,15 +80,21 @@ def _robot_key(spec: Spec) -> KeyPath:
     return ("robot", "model") if spec.robot.model is not None else ("robot", "urdf")
 
 
+def locked_joints(spec: Spec) -> dict[str, float]:
+    """The joints the spec's robot has locked, at their positions (rad or m): a built-in robot's
+    own (the Panda's fingers), then the spec's `robot.locked_joints`."""
+    builtin = builtin_locked_joints(spec.robot.model) if spec.robot.model is not None else {}
+    return {**builtin, **spec.robot.locked_joints}
+
+
 def _load_model(spec: Spec, diags: list[Diagnostic]) -> tuple[pin.Model | None, Path]:
     src = spec.source
     where = _robot_key(spec)
+    locked = locked_joints(spec)
     if spec.robot.model is not None:
         path = builtin_urdf_path(spec.robot.model)
-        locked = {**builtin_locked_joints(spec.robot.model), **spec.robot.locked_joints}
     else:
         path = _urdf_path(spec)
-        locked = dict(spec.robot.locked_joints)
         if not path.is_file():
             message = f"{path} is a folder, not a URDF file" if path.is_dir() else f"URDF file not found: {path}"
             diags.append(src.diagnostic(where, message))
