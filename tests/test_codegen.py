@@ -720,6 +720,68 @@ def test_bundle_builds_anywhere(built, tmp_path):
     assert "golden_vectors" in tested and "no_heap" in tested and "100% tests passed" in tested
 
 
+CELL_MAIN = r"""
+#include <stdio.h>
+#include "three_levels.h"
+#include "minimal.h"
+static three_levels_workspace a;
+static minimal_workspace b;
+int main(void)
+{
+    const double q[7] = {0.1, 0.5, -0.2, -1.0, 0.3, 1.0, 0.2}, dq[7] = {0.2, -0.1, 0.3, 0.1, -0.2, 0.4, 0.1};
+    const double ref[THREE_LEVELS_NREF] = {0.5, 0.1, 0.6};
+    double ta[7], tb[7];
+    int i, sa, sb;
+    if (three_levels_init(&a) != 0 || minimal_init(&b) != 0) return 2;
+    sa = three_levels_step(&a, q, dq, NULL, ref, ta, NULL);
+    sb = minimal_step(&b, q, dq, NULL, NULL, tb, NULL);
+    for (i = 0; i < 7; ++i) printf("%.17g %.17g\n", ta[i], tb[i]);
+    return sa != 0 || sb != 0;
+}
+"""
+
+
+@EXTENDED
+def test_two_bundles_in_one_cmake_project(built, tmp_path):
+    """A cell with two controllers: another CMake project add_subdirectory()s two bundles and links
+    both into one program (each with its own DAQP), which steps both as their own runtimes do; the
+    bundles' golden tests are left out of that project. With a bare-metal cross compiler (no
+    shared libraries), the same project builds for a Cortex-M7."""
+    cell = tmp_path / "cell"
+    shutil.copytree(built[0], cell / "three_levels", ignore=shutil.ignore_patterns("build", "*.so", "*_test", "*_test_*"))
+    compile_bundle(MINIMAL, cell / "minimal", build=False)
+    (cell / "main.c").write_text(CELL_MAIN)
+    (cell / "CMakeLists.txt").write_text(
+        "cmake_minimum_required(VERSION 3.13)\nproject(cell C)\nadd_subdirectory(three_levels)\nadd_subdirectory(minimal)\n"
+        "add_executable(cell main.c)\ntarget_link_libraries(cell PRIVATE three_levels minimal)\n"
+        "if(CMAKE_SYSTEM_NAME STREQUAL Generic)\n  target_link_options(cell PRIVATE --specs=nosys.specs)\nendif()\n")
+    if shutil.which("cmake") is None:
+        pytest.skip("cmake not installed")
+
+    def run(*command: str) -> str:
+        done = subprocess.run(command, cwd=cell, capture_output=True, text=True, timeout=900)
+        assert done.returncode == 0, " ".join(command) + "\n" + done.stdout + done.stderr
+        return done.stdout
+
+    run("cmake", "-S", ".", "-B", "host")
+    run("cmake", "--build", "host", "-j2")
+    assert not list((cell / "host").rglob("*_test*")), "a bundle's tests were built in another project"
+    torques = np.array([line.split() for line in run(str(cell / "host" / "cell")).splitlines()], dtype=float)
+    q = np.array([0.1, 0.5, -0.2, -1.0, 0.3, 1.0, 0.2])
+    dq = np.array([0.2, -0.1, 0.3, 0.1, -0.2, 0.4, 0.1])
+    assert np.array_equal(torques[:, 0], built[1].step(q, dq, ref=np.array([0.5, 0.1, 0.6])).tau)
+    assert relative_difference(torques[:, 1], build_controller(MINIMAL).step(q, dq).tau) <= 1e-8
+    if shutil.which("arm-none-eabi-gcc") is None:
+        pytest.skip("arm-none-eabi-gcc not installed: the host build passed")
+    (cell / "arm.cmake").write_text(
+        "set(CMAKE_SYSTEM_NAME Generic)\nset(CMAKE_SYSTEM_PROCESSOR arm)\nset(CMAKE_C_COMPILER arm-none-eabi-gcc)\n"
+        "set(CMAKE_TRY_COMPILE_TARGET_TYPE STATIC_LIBRARY)\n"
+        'set(CMAKE_C_FLAGS_INIT "-mcpu=cortex-m7 -mfpu=fpv5-d16 -mfloat-abi=hard")\n')
+    run("cmake", "-S", ".", "-B", "arm", "-DCMAKE_TOOLCHAIN_FILE=arm.cmake")
+    run("cmake", "--build", "arm", "-j2")
+    assert (cell / "arm" / "cell").is_file()
+
+
 @pytest.mark.skipif(shutil.which("clang") is None, reason="clang not installed")
 def test_clang_werror(built, tmp_path):
     copy = _fresh_copy(built[0], tmp_path)
