@@ -293,7 +293,7 @@ class Controller:
         values (default: those of the last step)."""
         param = self._ramp.now if param is None else param
         if np.all(np.isfinite(q)):
-            self._last_q = q
+            self._last_q = np.array(q, dtype=float)  # (a copy: a caller may reuse its array)
         dq = np.where(np.isfinite(dq) & (np.abs(dq) <= self._plausible_velocity), dq, 0.0)
         if self._last_q is None:
             return np.zeros(self.n)
@@ -339,7 +339,7 @@ class Controller:
         param = self._ramp.advance()
         if not np.isfinite(np.concatenate((q, dq, tau_ext, ref))).all():
             return self._fallback(q, dq, STATUS_NONFINITE_INPUT, np.zeros(0))
-        self._last_q = q
+        self._last_q = q.copy()  # (q may be a view of the caller's array, which it may reuse)
         data = self._evaluate(q, dq, tau_ext, ref, param)
         x = np.zeros(0)
         if self.nx:

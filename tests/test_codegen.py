@@ -312,11 +312,31 @@ def test_nonfinite_inputs_give_the_fallback(built, three_levels_spec, where):
     assert np.all(np.isfinite(result.tau)) and np.all(np.abs(result.tau) <= compiled.tau_max)
     assert result.x.size == 0 and not result.ddq.any()
     # exactly the Python runtime's fallback, with the same history
-    controller._last_gravity = np.zeros(controller.n)
     controller.step(q, dq, tau_ext if where != "tau_ext" and where != "all" else s.tau_ext, s.ref)
     expected = controller.step(q2, dq2, tau_ext, ref)
     assert expected.status == STATUS_NONFINITE_INPUT
     np.testing.assert_allclose(result.tau, expected.tau, rtol=1e-12, atol=1e-12)
+
+
+def test_a_reading_written_into_the_last_steps_array_keeps_the_last_finite_q(built, three_levels_spec):
+    """A loop that reads its sensors into the same array every step: after a NaN reading, both
+    runtimes' fallback compensates gravity at the q of the step before (the Python runtime kept a
+    view of the caller's array, and its fallback had no finite q: τ = 0)."""
+    _, compiled = built
+    controller = build_controller(three_levels_spec)
+    s = StateSampler(controller, seed=5).random()
+    torques = []
+    for runtime in (controller, compiled):
+        q = s.q.copy()
+        assert runtime.step(q, s.dq, s.tau_ext, s.ref).ok
+        q[:] = np.nan
+        result = runtime.step(q, s.dq, s.tau_ext, s.ref)
+        assert result.status == STATUS_NONFINITE_INPUT
+        torques.append(result.tau)
+    expected = controller.fallback_torque(s.q, s.dq)
+    assert np.abs(expected).max() > 1.0  # (gravity: not the zero torque of no finite q)
+    np.testing.assert_allclose(torques[0], expected, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(torques[1], expected, rtol=1e-12, atol=1e-12)
 
 
 @pytest.mark.parametrize("speed", [1e30, 1e154, -1e300])
@@ -472,6 +492,19 @@ def test_compiling_again_keeps_the_files_a_user_added_to_the_bundle(tmp_path):
     with pytest.raises(CodegenError, match="firmware/my_startup.c"):
         compile_bundle(MINIMAL, out, build=False)
     assert (out / "firmware" / "my_startup.c").read_text() == "mine" and (out / "my_main.c").is_file()
+
+
+def test_a_bundle_compiled_again_into_its_folder_loads_the_new_code(tmp_path):
+    """In one process, compile, load, change a gain, compile into the same folder, load: the new
+    controller runs (the loader maps a copy: dlopen returned the library already loaded there)."""
+    out, changed = tmp_path / "bundle", tmp_path / "minimal.yaml"
+    changed.write_text(MINIMAL.read_text().replace("gains: {kp: 100, kd: 20}", "gains: {kp: 400, kd: 40}"))
+    q, dq = np.array([0.1, 0.5, -0.2, -1.0, 0.3, 1.0, 0.2]), np.zeros(7)
+    for spec in (MINIMAL, changed):
+        with compile_c(spec, out, formulation="osc") as compiled:
+            expected = build_controller(spec, formulation="osc").step(q, dq).tau
+            assert relative_difference(compiled.step(q, dq).tau, expected) <= 1e-8, spec
+    assert relative_difference(build_controller(MINIMAL, formulation="osc").step(q, dq).tau, expected) > 1e-3
 
 
 def test_cli_compile(tmp_path):

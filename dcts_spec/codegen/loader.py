@@ -4,6 +4,9 @@ from __future__ import annotations
 
 import ctypes
 import json
+import os
+import shutil
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -53,7 +56,7 @@ class CompiledController:
         library = self.directory / m["library"]
         if not library.is_file():
             raise CodegenError(f"{library} not found: build the bundle first (make)")
-        self._lib = ctypes.CDLL(str(library))
+        self._lib = _load_copy(library)
         self._bind()
         levels = len(self.priorities)
         self.bound_names: list[str] = list(m["bound_names"])
@@ -270,6 +273,20 @@ class CompiledController:
 
     def __repr__(self) -> str:
         return f"CompiledController({self.name!r}, {self.formulation}, n={self.n}, nx={self.nx}, na={self.na})"
+
+
+def _load_copy(library: Path) -> ctypes.CDLL:
+    """The library, loaded from a private copy. dlopen hands back the library already loaded under
+    the same path, even after the file was rebuilt: a bundle compiled again into the same folder,
+    in the same process (a notebook's change-and-recompile loop), kept stepping the old code, with
+    the old gains and no warning. (The copy is unlinked once mapped.)"""
+    handle, copy = tempfile.mkstemp(prefix=f"{library.stem}-", suffix=library.suffix)
+    try:
+        with os.fdopen(handle, "wb") as out, open(library, "rb") as source:
+            shutil.copyfileobj(source, out)
+        return ctypes.CDLL(copy)
+    finally:
+        os.unlink(copy)
 
 
 def load_bundle(directory: str | Path) -> CompiledController:
