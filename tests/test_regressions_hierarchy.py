@@ -12,6 +12,8 @@
    beyond a limit, and every joint is back within its limits soon after the push.
 6. At an active position limit the torque settles (no step-to-step chatter).
 7. An arm stretched to its kinematic singularity toward an unreachable run-time target.
+8. A state beyond a limit is never "ok".
+9. A joint acceleration limit does not cap the way back to a position or velocity limit.
 
 Every check of an acceleration is made with Pinocchio's forward dynamics (ABA) applied to the
 returned torque, not with the controller's own `ddq`.
@@ -481,3 +483,50 @@ def test_status_ok_only_with_the_state_within_every_limit(robot):
         elif r.status == 0:
             assert not r.relaxed
     assert beyond_seen >= 15  # the case's premise
+
+
+# -- 9. the acceleration limit and the way back -------------------------------------------------------
+
+def test_beyond_a_velocity_limit_the_braking_is_not_capped_by_the_acceleration_limit():
+    """A joint beyond its velocity limit by more than a_max·dt: its bound asks for exactly the
+    braking that brings it back within one period (beyond the 20 rad/s² limit); within a_max·dt
+    it is the limit's bound as before, so the bound is continuous across a_max·dt; a joint
+    within its limits is bounded by ±a_max."""
+    from dcts_spec.limits.viability import acceleration_bounds
+
+    v_max, a_max = 2.0, 20.0
+
+    def bounds(v: float) -> tuple[float, float]:
+        lo, hi = acceleration_bounds(0.0, v, -3.0, 3.0, v_max, a_max, a_max, DT)
+        return float(lo), float(hi)
+
+    for v in (2.5, 2.0 + 1.5 * a_max * DT):  # beyond by more than a_max·dt
+        assert bounds(v) == pytest.approx(((v_max - v) / DT,) * 2, rel=1e-12), v
+        assert bounds(-v) == pytest.approx(((v - v_max) / DT,) * 2, rel=1e-12), v
+    lo, hi = bounds(2.0 + 0.5 * a_max * DT)  # beyond, but the limit can bring it back
+    assert lo == -a_max and hi == pytest.approx(-0.5 * a_max, rel=1e-9)
+    edge = 2.0 + a_max * DT
+    assert bounds(edge - 1e-9)[1] == pytest.approx(bounds(edge + 1e-9)[1], abs=1e-5)
+    for v in np.linspace(-1.9, 1.9, 9):  # within: never beyond ±a_max
+        lo, hi = bounds(float(v))
+        assert -a_max <= lo <= hi <= a_max, v
+
+
+def test_a_biased_torque_estimate_does_not_run_a_joint_away_under_an_acceleration_limit():
+    """The bench spec with a 20 rad/s² acceleration limit and a measured external torque biased by
+    0.05 Nm on every joint (MuJoCo, the Python runtime): on joint 7 (~1e-3 kg·m²) the bias is an
+    unmodelled ~50 rad/s², more than the limit. While the acceleration limit capped the braking
+    too, joint 7 ran away: 15 × its velocity limit and 44 rad beyond its position limit in 1.5 s.
+    Now the way back brakes beyond the limit, and joint 7 stays within 2 % of its velocity limit."""
+    from dcts_spec.sim.runner import prepare_simulation
+
+    text = BENCH.read_text()
+    assert "joint_acceleration" not in text and "  joint_torque: {max: 100}\n" in text and "  duration: 3.0" in text
+    text = text.replace("  joint_torque: {max: 100}\n", "  joint_torque: {max: 100}\n  joint_acceleration: {max: 20}\n")
+    text = text.replace("  duration: 3.0", "  duration: 1.5\n  external_torque: {mode: noisy, noise_std: 0.0, bias: 0.05, seed: 1}")
+    spec = load_spec_text(text)
+    log = prepare_simulation(spec, "python", None).run()
+    lim = dcts_spec.build_controller(spec).robot.limits
+    assert np.all(np.isfinite(log.q))
+    assert np.all(log.q <= lim.q_max + 1e-3) and np.all(log.q >= lim.q_min - 1e-3)
+    assert np.all(np.abs(log.dq) <= 1.02 * lim.v_max), (np.abs(log.dq) / lim.v_max).max(axis=0)

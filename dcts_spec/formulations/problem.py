@@ -66,6 +66,7 @@ class ControlProblem:
     external_torque: ca.SX  # τ_ext as used by the controller (0 when ignored)
     levels: list[Level]
     acceleration_rows: AccelerationRows  # joint, Cartesian and collision bounds on a
+    acceleration_limit: ca.SX  # |q̈_j| ≤ this, the joint acceleration limits (inf: none; or run-time parameters)
     torque_max: np.ndarray  # |τ| ≤ τ_max (full torque, gravity included), as compiled: the envelope
     period: float
     param: ca.SX  # input: run-time parameters
@@ -169,6 +170,7 @@ def build_problem(spec: Spec, robot: Robot) -> ControlProblem:
         external_torque=used_tau_ext,
         levels=levels,
         acceleration_rows=rows,
+        acceleration_limit=ca.vertcat(*[ca.SX(a) for a in params.joint.get("a_max", robot.limits.a_max)]),
         torque_max=robot.limits.tau_max,
         period=period,
         param=params.param,

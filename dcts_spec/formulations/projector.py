@@ -41,14 +41,18 @@ _TINY = 1e-12  # a joint's acceleration that does not depend on the scaling (|a_
 
 
 def _joint_bounds(problem: ControlProblem) -> tuple[ca.SX, ca.SX]:
-    """Per-joint acceleration bounds, the problem's joint rows (±BIG for joints without limits)."""
+    """Per-joint acceleration bounds, the problem's joint rows (±BIG for joints without limits),
+    within the joint acceleration limits. The rows let the way back to a position or velocity
+    bound brake beyond the acceleration limit (`limits/viability.py`); the baseline's own
+    scheme, which the paper compares with, keeps every bound within it."""
     n = problem.n
     rows = problem.acceleration_rows
     lower, upper = -BIG * ca.SX.ones(n), BIG * ca.SX.ones(n)
     for r, name in enumerate(rows.names):
         if name.startswith("joint:"):
             j = problem.robot.joint_names.index(name.removeprefix("joint:"))
-            lower[j], upper[j] = rows.lower[r], rows.upper[r]
+            limit = problem.acceleration_limit[j]
+            lower[j], upper[j] = (ca.fmin(ca.fmax(bound, -limit), limit) for bound in (rows.lower[r], rows.upper[r]))
     return lower, upper
 
 
