@@ -130,6 +130,16 @@ def _positive(value: Optional[float]) -> Optional[float]:
     return value
 
 
+def _duration(value: Optional[float]) -> Optional[float]:
+    """`--duration`: the range `scenario.duration` has (inf or 1e9 s ran out of memory)."""
+    from .spec.types import DURATION
+
+    try:
+        return DURATION.check(value)
+    except ValueError as error:
+        raise typer.BadParameter(str(error)) from None
+
+
 def _formulation_list(value: str) -> list[str]:
     """`--formulations a,b`: the names, each checked (a callback, so an error names the option)."""
     names = [f.strip() for f in value.split(",") if f.strip()]
@@ -138,6 +148,9 @@ def _formulation_list(value: str) -> list[str]:
     unknown = [f for f in names if f not in FORMULATIONS]
     if unknown:
         raise typer.BadParameter(f"unknown formulation {unknown[0]!r}; choose from {', '.join(FORMULATIONS)}")
+    twice = [f for i, f in enumerate(names) if f in names[:i]]
+    if twice:  # (it ran twice, and the comparison showed one of them twice)
+        raise typer.BadParameter(f"{twice[0]} is named twice")
     return names
 
 
@@ -153,7 +166,7 @@ OldOutput = Annotated[Optional[Path], typer.Option("--output", hidden=True, help
 FormulationOption = Annotated[Optional[Formulation], typer.Option(help="override controller.formulation")]
 RuntimeOption = Annotated[Runtime, typer.Option(
     help="controller in the loop: c (the generated C bundle) or python (CasADi from Python)")]
-DurationOption = Annotated[Optional[float], typer.Option(callback=_positive, help="override scenario.duration, in s")]
+DurationOption = Annotated[Optional[float], typer.Option(callback=_duration, help="override scenario.duration, in s")]
 CacheOption = Annotated[bool, typer.Option(
     "--cache/--no-cache", help="c runtime: reuse the built bundle from the cache ($DCTS_CACHE_DIR or "
     "~/.cache/dcts/bundles); --no-cache builds it afresh and leaves the cache alone")]
@@ -458,6 +471,17 @@ def _exit_on_sigterm(signum: int, _frame) -> None:
     sys.exit(128 + signum)
 
 
+def _interrupted(error: BaseException) -> bool:
+    """Is a Ctrl-C behind this error? One that lands inside CasADi's C code reaches Python as a
+    SystemError (a result with an exception set) whose context is the KeyboardInterrupt."""
+    seen: BaseException | None = error
+    while seen is not None:
+        if isinstance(seen, KeyboardInterrupt):
+            return True
+        seen = seen.__cause__ or seen.__context__
+    return False
+
+
 def main() -> None:
     """Entry point: no Python traceback reaches the user unless DCTS_DEBUG is set."""
     signal.signal(signal.SIGTERM, _exit_on_sigterm)
@@ -467,6 +491,8 @@ def main() -> None:
         typer.echo(str(error), err=True)
         sys.exit(1)
     except Exception as error:  # a bug, or an environment problem: say what, not where
+        if _interrupted(error):
+            sys.exit(128 + signal.SIGINT)
         if os.environ.get("DCTS_DEBUG"):
             raise
         typer.echo(f"error: {type(error).__name__}: {error} (set DCTS_DEBUG=1 to see the traceback)", err=True)

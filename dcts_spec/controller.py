@@ -305,6 +305,8 @@ class Controller:
         """The QP data and output maps at a state (for tests and tools); `param` defaults to the
         values of the last step."""
         param = self._ramp.now if param is None else np.asarray(param, dtype=float).reshape(-1)
+        if param.size != self.param_size:
+            raise ValueError(f"param must have {self.param_size} values (see param_layout), got {param.size}")
         data = self._evaluate(*self._inputs(q, dq, tau_ext, ref), param)
         return {name: value.copy() for name, value in data.items()}
 

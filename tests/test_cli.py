@@ -65,9 +65,12 @@ def test_compare_help_lists_the_choices() -> None:
     ("simulate", str(MINIMAL), "--formulation", "nope"),
     ("simulate", str(MINIMAL), "--duration", "-1"),
     ("simulate", str(MINIMAL), "--duration", "0"),
+    ("simulate", str(MINIMAL), "--duration", "inf"),  # (a MemoryError or OverflowError, exit 3, before)
+    ("compare", str(MINIMAL), "--duration", "1e9"),
     ("simulate", str(MINIMAL), "--no-such-option"),
     ("compare", str(MINIMAL), "--formulations", "dcts,nope"),
     ("compare", str(MINIMAL), "--formulations", ","),
+    ("compare", str(MINIMAL), "--formulations", "dcts,osc,dcts"),
     ("compare", str(MINIMAL), "--runtime", "fortran"),
     ("compile", str(MINIMAL), "--target", "z80"),
     ("compile", str(MINIMAL), "--formulation", "nope"),
@@ -103,6 +106,23 @@ def test_an_internal_error_exits_3_not_2(monkeypatch: pytest.MonkeyPatch, capsys
         cli.main()
     assert exited.value.code == 3
     assert "RuntimeError: a bug" in capsys.readouterr().err
+
+
+def test_ctrl_c_inside_casadi_exits_130(monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture) -> None:
+    """A Ctrl-C during CasADi's C code surfaces as a SystemError raised while handling the
+    KeyboardInterrupt (`DM.__array__ returned a result with an exception set`): an interrupt, 130,
+    not an internal error (it was 3, with that message)."""
+    def interrupted_app() -> None:
+        try:
+            raise KeyboardInterrupt
+        except KeyboardInterrupt:
+            raise SystemError("<function DM.__array__> returned a result with an exception set")
+
+    monkeypatch.setattr(cli, "app", interrupted_app)
+    monkeypatch.delenv("DCTS_DEBUG", raising=False)
+    with pytest.raises(SystemExit) as exited:
+        cli.main()
+    assert exited.value.code == 130 and "SystemError" not in capsys.readouterr().err
 
 
 def test_validate_json_is_a_list_for_one_file() -> None:

@@ -162,6 +162,12 @@ def test_an_invalid_set_is_refused_and_the_old_one_kept(values, field, words):
     assert param.params() == kept
 
 
+def test_evaluate_data_names_a_parameter_vector_of_the_wrong_size():
+    param = _controller("osc", ALL)
+    with pytest.raises(ValueError, match=f"param must have {param.param_size} values .* got 3"):
+        param.evaluate_data(Q, DQ, param=[1.0, 2.0, 3.0])  # (a numpy broadcast error in a buffer, before)
+
+
 def test_limits_keep_their_compiled_structure():
     """A run-time limit replaces a finite compiled one; the rows and terms stay the compiled ones."""
     plain, param = _controller("dcts"), _controller("dcts", ALL)

@@ -111,7 +111,7 @@ class Range:
     open: bool = False
 
     def __get_pydantic_core_schema__(self, source: Any, handler: GetCoreSchemaHandler) -> core_schema.CoreSchema:
-        return core_schema.no_info_after_validator_function(self._check, handler(source))
+        return core_schema.no_info_after_validator_function(self.check, handler(source))
 
     def __get_pydantic_json_schema__(self, schema: core_schema.CoreSchema, handler: GetJsonSchemaHandler) -> dict:
         out = copy.deepcopy(handler(schema))  # the number schemas above are shared between types
@@ -125,7 +125,8 @@ class Range:
         for inner in [*schema.get("anyOf", []), *([schema["items"]] if "items" in schema else [])]:
             self._bound(inner)
 
-    def _check(self, value: Any) -> Any:
+    def check(self, value: Any) -> Any:
+        """`value` (a number or tuple of numbers) if within the range, else ValueError saying why."""
         if isinstance(value, tuple):
             for i, v in enumerate(value):
                 if not self._holds(v):
