@@ -8,6 +8,8 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
+from .formulations import build_problem
+from .formulations.hierarchy import OverConstrainedLevel, level_structure
 from .limits.naming import bound_text
 from .robot.model import Robot
 from .robot.resolve import frame_candidates, resolve_robot
@@ -395,6 +397,8 @@ def _levels(spec: Spec, robot: Robot, q: np.ndarray) -> tuple[list[LevelReport],
                     f"priority {p} asks for {level.dimension} directions, and with the higher priorities "
                     f"{asked} of the robot's {robot.nv} joints' directions: only the lowest priority may be "
                     "over-constrained (give these tasks the lowest priority, or fewer axes)"))
+            elif (structure_error := _over_constrained_everywhere(spec, robot)) is not None:
+                diags.append(spec.source.diagnostic(spec.priority_path(structure_error.priority), str(structure_error)))
             else:
                 diags.append(spec.source.diagnostic(
                     spec.priority_path(p),
@@ -402,6 +406,17 @@ def _levels(spec: Spec, robot: Robot, q: np.ndarray) -> tuple[list[LevelReport],
                     "priorities at the initial configuration; only the lowest priority may be over-constrained",
                     "warning"))
     return levels, diags
+
+
+def _over_constrained_everywhere(spec: Spec, robot: Robot) -> OverConstrainedLevel | None:
+    """What compiling the spec would say of its levels' structure (`level_structure`, at the
+    configurations it samples), asked where one conflicts at the initial configuration: validate
+    said "ok" to a spec that `compile` then refused."""
+    try:
+        level_structure(build_problem(spec, robot))
+    except OverConstrainedLevel as error:
+        return error
+    return None
 
 
 def _numeric_jacobian(task: CartesianTask | JointTask, model: pin.Model, data: pin.Data) -> np.ndarray:
