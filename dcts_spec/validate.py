@@ -172,7 +172,8 @@ def _check_cartesian_bounds(spec: Spec, robot: Robot, q0: np.ndarray) -> list[Di
     is a warning (the task will be scaled or bent there, as the bound asks)."""
     diags: list[Diagnostic] = []
     data = robot.model.createData()
-    pin.framesForwardKinematics(robot.model, data, q0)
+    pin.computeJointJacobians(robot.model, data, q0)
+    pin.updateFramePlacements(robot.model, data)
     targets = _position_targets(spec)
     for i, b in enumerate(robot.cartesian_bounds):
         c = float(b.coordinate(data.oMf[robot.model.getFrameId(b.frame)].translation))
@@ -180,6 +181,14 @@ def _check_cartesian_bounds(spec: Spec, robot: Robot, q0: np.ndarray) -> list[Di
         if not b.c_min - 1e-9 <= c <= b.c_max + 1e-9:
             diags.append(spec.source.diagnostic(("limits", "cartesian", i),
                                                 f"{b.frame}.{b.label} starts at {c:.4g} m, outside its bound {text}"))
+        reach = _acceleration_reach(robot, data, b)
+        if reach < b.a_max:
+            diags.append(spec.source.diagnostic(
+                ("limits", "cartesian", i),
+                f"the joint acceleration limits move {b.frame}.{b.label} at {reach:.3g} m/s² at most (at the initial "
+                f"configuration), less than the {b.a_max:g} m/s² this bound counts on to brake before it: near the "
+                f"bound it can be crossed (status \"limits relaxed\"); give it max_acceleration: {_round_down(reach)} "
+                "or less", "warning"))
         for frame, at, what, position in targets:
             target = float(b.coordinate(position))
             if frame == b.frame and not b.c_min <= target <= b.c_max:
@@ -189,6 +198,25 @@ def _check_cartesian_bounds(spec: Spec, robot: Robot, q0: np.ndarray) -> list[Di
                         f"accelerating {b.frame}, and motion along the bound is no longer damped; put the target "
                         f"inside", "warning"))
     return diags
+
+
+def _acceleration_reach(robot: Robot, data: pin.Data, bound) -> float:
+    """The largest acceleration of the bound's coordinate the joint acceleration limits allow at
+    the configuration of `data` (its Jacobians computed), velocity terms aside: Σⱼ |dᵀJⱼ| a_max,j."""
+    J = pin.getFrameJacobian(robot.model, data, robot.model.getFrameId(bound.frame), pin.LOCAL_WORLD_ALIGNED)
+    row = np.abs(np.asarray(bound.direction) @ J[:3])
+    moving = row > 0.0  # (a joint without a limit that moves it: no bound on the reach)
+    if not moving.any():  # (no joint moves it here: nothing to brake)
+        return float("inf")
+    return float(np.sum(row[moving] * robot.limits.a_max[moving]))
+
+
+def _round_down(value: float) -> str:
+    """A round number at most `value` (two significant digits), for a suggestion."""
+    if value <= 0.0:
+        return "0"
+    step = 10.0 ** (np.floor(np.log10(value)) - 1)
+    return f"{np.floor(value / step) * step:.10g}"
 
 
 def _position_targets(spec: Spec) -> list[tuple[str, tuple, str, np.ndarray]]:
