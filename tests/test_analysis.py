@@ -334,6 +334,28 @@ def test_printed_summary_carries_units(case) -> None:
     assert "relaxed    0.3 m ≤ tool.z: 3 steps between t = 0.01 s and 0.018 s" in text
 
 
+def test_a_relaxed_joint_says_which_of_its_limits_its_state_was_beyond(case) -> None:
+    """One row holds a joint's position and velocity limits: the summary says which one the state
+    crossed in the relaxed steps (a user could not tell), or that it crossed neither."""
+    _, robot, log, _ = case
+    lim = robot.limits
+    relaxed = np.zeros((40, 2), dtype=bool)
+    relaxed[[5, 6], 0] = True
+    dq = log.dq.copy()
+    dq[6, 0] = -(lim.v_max[0] + 0.25)
+    run, _ = _summary(case, bound_names=["joint:joint1", "cartesian:tool.z"], relaxed=relaxed, dq=dq)
+    assert run.summary["relaxed_bounds"]["joint:joint1"]["beyond"] == "its velocity limit by up to 0.25 rad/s"
+    assert "2 steps between t = 0.01 s and 0.012 s; beyond its velocity limit by up to 0.25 rad/s" in describe(run)
+    q = log.q.copy()
+    q[5, 0] = lim.q_max[0] + 0.125
+    run, _ = _summary(case, bound_names=["joint:joint1", "cartesian:tool.z"], relaxed=relaxed, dq=dq, q=q)
+    assert run.summary["relaxed_bounds"]["joint:joint1"]["beyond"] == (
+        "its position limit by up to 0.125 rad and its velocity limit by up to 0.25 rad/s")
+    run, _ = _summary(case, bound_names=["joint:joint1", "cartesian:tool.z"], relaxed=relaxed)
+    assert run.summary["relaxed_bounds"]["joint:joint1"]["beyond"].startswith("none of its limits")
+    assert "beyond" not in run.summary["relaxed_bounds"].get("cartesian:tool.z", {})
+
+
 def test_relaxed_bounds_are_worded_as_validate_words_them() -> None:
     spec = load_spec_text(SPEC.replace("reference: {input: true}", "reference: {position: [0.5, 0, 0.1]}"))
     report = validate_spec(spec)

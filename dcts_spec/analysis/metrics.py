@@ -12,7 +12,8 @@ Definitions (N samples t_k = k T; violations are 0 when a limit holds or does no
   up to 2 q̇_max/T a step)
 - solver_failures = #{k: status_k < 0}; limits_relaxed = #{k: status_k = 1}; relaxed_bounds: for
   each joint/Cartesian bound that gave way (keyed by its row name), the bound as validate words it,
-  its number of steps and the first and last time
+  its number of steps and the first and last time; for a joint also `beyond`, which of its limits
+  (position, velocity) its state was beyond in those steps and by how much at most
 - min_scaling = min over samples and levels of the task scalings; min_scaling_at: the first sample
   and the highest level where it occurs (priority, its tasks, time), None if no level ever scaled
 - task_rms_error[t] = sqrt(mean_k ‖Δx_t,k‖²), task_mean_error[t] = mean_k ‖Δx_t,k‖ (SI units); for
@@ -50,7 +51,7 @@ import numpy as np
 
 from ..controller import STATUS_LIMITS_RELAXED
 from ..limits.collision import distance_function
-from ..limits.naming import row_text
+from ..limits.naming import joint_row_name, joint_unit, row_text
 from ..robot.collision import CollisionModel
 from ..robot.model import Robot
 from ..sim.log import SimulationLog
@@ -168,14 +169,29 @@ def _min_scaling_at(log: SimulationLog, series: TimeSeries, priorities: list[int
 
 
 def _relaxed_bounds(log: SimulationLog, robot: Robot, collision: CollisionModel | None) -> dict[str, dict[str, Any]]:
-    """Each bound that gave way: the bound as text, how many steps, the first and last time (s)."""
+    """Each bound that gave way: the bound as text, how many steps, the first and last time (s);
+    for a joint, which of its limits the state was beyond in those steps (one row holds both)."""
     out = {}
-    for j, name in enumerate(log.bound_names):
-        steps = np.flatnonzero(log.relaxed[:, j])
+    rows = {joint_row_name(joint): j for j, joint in enumerate(robot.joint_names)}
+    for r, name in enumerate(log.bound_names):
+        steps = np.flatnonzero(log.relaxed[:, r])
         if steps.size:
             out[name] = {"bound": row_text(robot, name, collision), "steps": int(steps.size),
                          "first": float(log.time[steps[0]]), "last": float(log.time[steps[-1]])}
+            if name in rows:
+                out[name]["beyond"] = _joint_beyond(log, robot, rows[name], steps)
     return out
+
+
+def _joint_beyond(log: SimulationLog, robot: Robot, j: int, steps: np.ndarray) -> str:
+    """Which of joint j's limits its state was beyond in `steps`, and by how much at most, as text."""
+    lim, unit = robot.limits, joint_unit(robot, j)
+    q, dq = log.q[steps, j], log.dq[steps, j]
+    position = _peak(np.maximum(_excess(q, lim.q_max[j]), _excess(-q, -lim.q_min[j])))
+    velocity = _peak(_excess(np.abs(dq), lim.v_max[j]))
+    parts = [f"its {what} limit by up to {by:.3g} {u}" for what, by, u in
+             (("position", position, unit), ("velocity", velocity, per(unit, "s"))) if by > 0.0]
+    return " and ".join(parts) if parts else "none of its limits (the braking it asked for was more than the torques give)"
 
 
 def pair_distances(collision: CollisionModel, robot: Robot, q: np.ndarray) -> np.ndarray:

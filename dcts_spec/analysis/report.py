@@ -49,7 +49,9 @@ def describe(run: RunResult) -> str:
     lines.append(f"  solver     {s['solver_failures']} failures, {s['limits_relaxed']} steps with relaxed limits, "
                  f"min scaling {min_scaling_text(s)}")
     for r in s.get("relaxed_bounds", {}).values():
-        lines.append(f"  relaxed    {r['bound']}: {r['steps']} steps between t = {r['first']:.4g} s and {r['last']:.4g} s")
+        beyond = f"; beyond {r['beyond']}" if "beyond" in r else ""
+        lines.append(f"  relaxed    {r['bound']}: {r['steps']} steps between t = {r['first']:.4g} s and {r['last']:.4g} s"
+                     f"{beyond}")
     lines.append(f"  tasks      RMS error (final): {task_errors_text(s)}")
     lines.append(f"             priority-1 mean acceleration error {q('primary_mean_acceleration_error')}")
     lines.append(f"  external   disturbance torque up to {q('max_disturbance_torque')} (payloads included), "
