@@ -505,6 +505,9 @@ def test_a_bundle_compiled_again_into_its_folder_loads_the_new_code(tmp_path):
             expected = build_controller(spec, formulation="osc").step(q, dq).tau
             assert relative_difference(compiled.step(q, dq).tau, expected) <= 1e-8, spec
     assert relative_difference(build_controller(MINIMAL, formulation="osc").step(q, dq).tau, expected) > 1e-3
+    for call in (lambda: compiled.step(q, dq), compiled.reset, compiled.params):  # closed by the `with`
+        with pytest.raises(RuntimeError, match="closed"):
+            call()
 
 
 def test_cli_compile(tmp_path):

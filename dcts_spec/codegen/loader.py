@@ -252,6 +252,8 @@ class CompiledController:
 
     def reset(self) -> None:
         """Forget the history (the last finite q)."""
+        if not self._open:  # (as step and the parameters: a closed controller says so)
+            raise RuntimeError("the controller was closed")
         self._reset(self._ws)
 
     def close(self) -> None:
