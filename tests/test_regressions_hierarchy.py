@@ -14,6 +14,7 @@
 7. An arm stretched to its kinematic singularity toward an unreachable run-time target.
 8. A state beyond a limit is never "ok".
 9. A joint acceleration limit does not cap the way back to a position or velocity limit.
+10. A level the levels above leave no direction at all is damped to nothing, not inverted.
 
 Every check of an acceleration is made with Pinocchio's forward dynamics (ABA) applied to the
 returned torque, not with the controller's own `ddq`.
@@ -530,3 +531,45 @@ def test_a_biased_torque_estimate_does_not_run_a_joint_away_under_an_acceleratio
     assert np.all(np.isfinite(log.q))
     assert np.all(log.q <= lim.q_max + 1e-3) and np.all(log.q >= lim.q_min - 1e-3)
     assert np.all(np.abs(log.dq) <= 1.02 * lim.v_max), (np.abs(log.dq) / lim.v_max).max(axis=0)
+
+
+# -- 10. a level left no direction ----------------------------------------------------------------------
+
+LOST_LEVEL = """
+version: 1
+name: lost_level
+robot: {model: panda}
+limits:
+  joint_velocity: {max: 90, unit: deg/s}
+tasks:
+  - {name: tool_pos, type: position, frame: panda_hand_tcp, priority: 1, gains: {kp: 200, kd: 28},
+     reference: {position: [0.5, 0.1, 0.3]}}
+  - {name: tool_axis, type: orientation, frame: panda_hand_tcp, axes: [rx, ry], priority: 2, gains: {kp: 150, kd: 24},
+     reference: {rpy: [180, 0, 0], unit: deg}}
+  - {name: elbow, type: joint, joints: [panda_joint4], priority: 3, gains: {kp: 50, kd: 14}, reference: {q: [-2.0]}}
+  - {name: posture, type: joint, priority: 4, gains: {kp: 10, kd: 6}, reference: {q: [0, -0.3, 0, -2.2, 0, 2.0, 0.8]}}
+"""
+
+
+def test_a_level_left_no_direction_is_damped_not_inverted():
+    """At this Panda configuration the tool's position and two orientation axes take every
+    direction that moves joint 4: the elbow task at priority 3 has a restricted J M⁻¹ Jᵀ of
+    rounding noise. Judged against its own (noise) scale it looked regular; its inverse was ~1e33,
+    the scaled QP data ~1e-17, and DAQP failed: every step at rest there fell back (status −2,
+    found from outside). Now it is damped to nothing: the steps there solve, and the two levels
+    above are scaled as in the same spec without the elbow task. (Not more: the freedom left is a
+    basis sized for a full-rank stack, so the posture below has one direction fewer than there,
+    and where the torque limits bind that moves the levels above too, by 0.3 % here; the elbow's
+    own scaling reads 1, though its variables move nothing.)"""
+    q0 = np.array([0, -0.3, 0, -2.2, 0, 2.0, 0.8])
+    with_elbow = _controller(LOST_LEVEL)
+    without = _controller(LOST_LEVEL.replace(
+        "  - {name: elbow, type: joint, joints: [panda_joint4], priority: 3, gains: {kp: 50, kd: 14}, "
+        "reference: {q: [-2.0]}}\n", "").replace("priority: 4", "priority: 3"))
+    a, b = with_elbow.step(q0, np.zeros(7)), without.step(q0, np.zeros(7))
+    assert a.status == 0 and b.status == 0, (a.status, b.status)
+    np.testing.assert_allclose(a.scaling[:2], b.scaling[:2], atol=1e-9)
+    assert np.abs(with_elbow.evaluate_data(q0, np.zeros(7))["f"]).max() > 1e-3  # (was ~1e-17)
+    rng = np.random.default_rng(4)
+    near = [with_elbow.step(q0 + rng.uniform(-1e-6, 1e-6, 7), rng.uniform(-1e-3, 1e-3, 7)).status for _ in range(30)]
+    assert min(near) >= 0, near

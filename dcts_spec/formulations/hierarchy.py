@@ -34,6 +34,9 @@ from .qp import Affine
 # within 1e-4 (20,000 sampled; 0.05 % within 1e-3).
 SINGULAR_PIVOT = 1e-4
 MAX_DAMPING = 1e-4
+# A level's J M⁻¹ Jᵀ restricted by the levels above counts as having lost rank entirely where its
+# mean eigenvalue falls below this fraction of the unrestricted one (`damped_inverse`).
+RANK_LOST_SCALE = 1e-8
 RANK_TOLERANCE = 1e-6
 RANK_SAMPLES = 12
 # Least-squares levels: the acceleration energy only breaks ties (weight relative to the task).
@@ -44,10 +47,17 @@ NULL_SPACE_REGULARIZATION = 1.0
 RELEASED_ENERGY_WEIGHT = 1.0
 
 
-def damped_inverse(a: ca.SX) -> ca.SX:
-    """(A + λ²I)⁻¹ of a positive semi-definite A, with λ > 0 only near a singularity of A."""
+def damped_inverse(a: ca.SX, unrestricted: ca.SX) -> ca.SX:
+    """(A + λ²I)⁻¹ of a positive semi-definite A, with λ > 0 only near a singularity of A.
+
+    `unrestricted`: the mean eigenvalue the level would have with no level above it (an
+    estimate). A level the levels above leave no direction at all has an A of rounding noise
+    (~1e-33), whose pivots are no smaller than its mean: judged against itself it looked regular,
+    its inverse was ~1e33 and the QP data ~1e16. Against at least RANK_LOST_SCALE of what it has
+    unrestricted, it is singular and damped to nothing (a Panda whose elbow joint task lost its
+    one direction to the tool's pose at the initial configuration: every step fell back)."""
     m = a.shape[0]
-    mean = ca.trace(a) / m + 1e-300
+    mean = ca.fmax(ca.trace(a) / m, RANK_LOST_SCALE * unrestricted) + 1e-300
     # min pivot² ≥ λ_min(A), and det A = Π pivots², so a vanishing eigenvalue shows in a pivot
     pivots = ca.diag(cholesky(a + 1e-12 * mean * ca.SX.eye(m))) ** 2
     smallest = pivots[0]
@@ -87,7 +97,9 @@ def recursive_hierarchy(
         J = level.jacobian
         Jr = ca.mtimes(J, N)
         Minv_JrT = ca.mtimes(Minv, Jr.T)
-        Jbar = ca.mtimes(Minv_JrT, damped_inverse(symmetric_product(Jr.T, Minv_JrT)))
+        # (its unrestricted scale from diag(M⁻¹): m·n operations, where J M⁻¹ Jᵀ would take m·n²)
+        unrestricted = ca.dot(ca.sum1(J * J).T, ca.diag(Minv)) / J.shape[0]
+        Jbar = ca.mtimes(Minv_JrT, damped_inverse(symmetric_product(Jr.T, Minv_JrT), unrestricted))
         if level.activation is not None:
             Jbar = ca.mtimes(Jbar, ca.diag(level.activation))
         offset = offset + ca.mtimes(Jbar, v.offset - level.bias - ca.mtimes(J, offset))
