@@ -303,6 +303,13 @@ def _check_controller(spec: Spec, robot: Robot) -> list[Diagnostic]:
         diags.append(src.diagnostic(("controller", "priority_weights"),
                                     "no effect on dcts, which solves its priority levels lexicographically; the "
                                     "weights apply to qp_mt and qp_md only", "warning"))
+    unkept = {"osc": "keeps no limit (its torque is only clipped)",
+              "projector": "keeps the joint limits only (its torque is clipped)"}.get(ctl.formulation)
+    for section in ("cartesian", "collision"):
+        if unkept and getattr(spec.limits, section):  # (the run's summary then read "ok", inside an obstacle)
+            diags.append(src.diagnostic(
+                ("limits", section), f"formulation {ctl.formulation} {unkept}: these {section} limits are not "
+                f"held, and its steps say \"ok\" all the same (dcts, qp_mt and qp_md hold them)", "warning"))
     for name in ("joint_damping", "fallback_damping"):
         size = size_of(getattr(ctl, name))
         if size is not None and size != robot.nv:

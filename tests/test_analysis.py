@@ -356,6 +356,14 @@ def test_a_relaxed_joint_says_which_of_its_limits_its_state_was_beyond(case) -> 
     assert "beyond" not in run.summary["relaxed_bounds"].get("cartesian:tool.z", {})
 
 
+def test_the_printed_summary_gives_the_collision_excess_where_pairs_are_watched(case) -> None:
+    run, _ = _summary(case)
+    assert "collision" not in describe(run).split("\n")[1]  # (no collision section)
+    run.summary |= {"max_collision_violation": 0.038}
+    run.summary["units"]["max_collision_violation"] = "m"
+    assert "collision 0.038 m" in describe(run).split("\n")[1], describe(run).split("\n")[1]
+
+
 def test_relaxed_bounds_are_worded_as_validate_words_them() -> None:
     spec = load_spec_text(SPEC.replace("reference: {input: true}", "reference: {position: [0.5, 0, 0.1]}"))
     report = validate_spec(spec)

@@ -111,6 +111,9 @@ BAD = [
     ({"obstacles": {"a": {"type": "sphere", "radius": 0.1}, "b": {"type": "plane", "normal": [0, 0, 1]}},
       "pairs": [{"between": ["a", "b"]}]}, "pairs[0].between", "both fixed in the world"),
     ({"exclude": [["link1", "link3"]], "pairs": [{"between": ["link3", "link1"]}]}, "pairs[0].between", "also in `exclude`"),
+    # (the later, looser minimum replaced the first, unseen)
+    ({"pairs": [{"between": ["link1", "link3"], "min_distance": 0.05}, {"between": ["link3", "link1"], "min_distance": 0.01}]},
+     "pairs[1].between", "already a pair at pairs[0]"),
     ({"pairs": [{"between": ["link1", "link3"], "min_distance": 0.2}]}, "pairs[0].min_distance",
      "must be below the activation_distance (0.15 m)"),
     ({"links": {"link7": [{"type": "capsule", "start": [0, 0, 0.1], "end": [0, 0, 0.1], "radius": 0.05}]}},

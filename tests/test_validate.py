@@ -2,11 +2,10 @@
 
 from __future__ import annotations
 
-import re
-
 import difflib
 import json
 import math
+import re
 from pathlib import Path
 
 import pytest
@@ -312,6 +311,28 @@ def test_a_cartesian_bound_braking_beyond_what_the_joint_acceleration_limits_all
     assert not any("acceleration limits move" in m for _, m in _warnings(spec))
     spec.write_text(text.replace("  joint_acceleration: {max: 1}\n", ""))
     assert not any("acceleration limits move" in m for _, m in _warnings(spec))
+
+
+@pytest.mark.parametrize("formulation", ["osc", "projector", "dcts"])
+def test_a_formulation_that_does_not_hold_cartesian_or_collision_limits_says_so(tmp_path: Path, formulation: str) -> None:
+    """osc holds no limit and the projector the joint ones only: their steps read "ok" inside an
+    obstacle (found from outside, with no warning anywhere)."""
+    spec = tmp_path / "unkept.yaml"
+    spec.write_text(f"""version: 1
+name: unkept
+robot: {{model: iiwa14}}
+controller: {{formulation: {formulation}}}
+limits:
+  cartesian:
+    - {{frame: tool, axis: z, min: 0.05}}
+  collision:
+    obstacles: {{ball: {{type: sphere, center: [0.673, 0.0, 0.40], radius: 0.05}}}}
+tasks:
+  - {{name: reach, type: position, frame: tool, priority: 1, gains: {{kp: 10, kd: 6}}, reference: {{position: [0.5, 0, 0.6]}}}}
+scenario: {{duration: 1, initial_q: [0, 30, 0, -60, 0, 60, 0], unit: deg}}
+""")
+    warned = {line for line, m in _warnings(spec) if f"formulation {formulation}" in m and "not held" in m}
+    assert warned == (set() if formulation == "dcts" else {6, 8})
 
 
 def test_a_push_or_parameter_change_after_the_run_ends_is_a_warning(tmp_path: Path) -> None:

@@ -170,10 +170,16 @@ class _Resolver:
             for a, b in candidates:
                 if frozenset((a.name, b.name)) not in skipped:
                     chosen[frozenset((a.name, b.name))] = (a, b, s.min_distance, s.max_acceleration)
+        listed: dict[frozenset[str], int] = {}
         for i, pair in enumerate(s.pairs):
             key = self._pair_key(("pairs", i, "between"), pair.between, bodies)
             if key is None:
                 continue
+            if key in listed:  # (the later one replaced the first: a safety distance weakened unseen)
+                self.error(("pairs", i, "between"), f"{' and '.join(pair.between)} are already a pair at "
+                           f"pairs[{listed[key]}]: give each pair once")
+                continue
+            listed[key] = i
             if key in excluded:
                 self.error(("pairs", i, "between"), f"{' and '.join(pair.between)} are also in `exclude`: keep one")
                 continue
