@@ -143,7 +143,7 @@ def test_header_lists_every_joint_limit_with_units(sheet):
         assert units == JOINT_UNITS, name
         assert np.allclose(values, EXPECTED_JOINTS[name], rtol=1e-5), (name, values)
     # what |ddq| max does not bound (limits/viability.py): the way back after a push
-    assert " *   |ddq| max bounds the command; a joint beyond its position or velocity limit" in header
+    assert " *   |ddq| max bounds the command; a joint beyond its compiled position or velocity limit" in header
 
 
 def test_header_lists_cartesian_bounds_with_frame_direction_and_offsets(sheet):

@@ -248,8 +248,8 @@ def limits_text(controller: Controller) -> str:
     if not np.all(np.isfinite(lim.a_max)):
         lines.append(f" *   |ddq| none: the position and velocity bounds assume braking at {number(DEFAULT_BRAKING)} rad/s² (m/s²).")
     if np.isfinite(lim.a_max).any() and how is _QP_ENFORCEMENT:
-        lines += wrap("|ddq| max bounds the command; a joint beyond its position or velocity limit (after a push) "
-                      "brakes back harder than that, as its torque limit allows.", indent=" *   ")
+        lines += wrap("|ddq| max bounds the command; a joint beyond its compiled position or velocity limit (after "
+                      "a push) brakes back harder than that, as its torque limit allows.", indent=" *   ")
     bounds = controller.robot.cartesian_bounds
     if not bounds:
         lines.append(" * Cartesian bounds: none.")

@@ -28,7 +28,8 @@ def joint_rows(limits: JointLimits, q: ca.SX, dq: ca.SX, dt: float, names: list[
         if not np.isfinite(bounded).any():
             continue
         braking = a_max[j] if np.isfinite(limits.a_max[j]) else DEFAULT_BRAKING
-        lo, hi = acceleration_bounds(q[j], dq[j], q_min[j], q_max[j], v_max[j], a_max[j], braking, dt)
+        lo, hi = acceleration_bounds(q[j], dq[j], q_min[j], q_max[j], v_max[j], a_max[j], braking, dt,
+                                     (limits.q_min[j], limits.q_max[j], limits.v_max[j]))
         selection = ca.SX.zeros(1, n)
         selection[0, j] = 1.0
         rows.append(selection)

@@ -14,10 +14,10 @@ and heading back at the braking acceleration, so the joint stops at its bound in
 bouncing off it. Beyond the bound, the end-of-step term brings it back. The position bounds are
 then clamped into the velocity bounds (the velocity limit takes precedence: a joint beyond its
 position bound heads back no faster than its velocity limit), and the result into ±`accel_limit`,
-except where it demands braking beyond that limit: the way back to the position and velocity
-bounds takes precedence over the acceleration limit (as fast as the torque limits allow, which
-the QP's relaxation then decides). Should lower and upper still cross (the position terms
-themselves conflict), both become their midpoint so the QP stays feasible.
+which gives way only to bring a state beyond its compiled envelope back (by up to the acceleration
+that removes the excess in one period; the torque limits, through the QP's relaxation, decide how
+much of it is met). Should lower and upper still cross (the position terms themselves conflict),
+both become their midpoint so the QP stays feasible.
 """
 
 from __future__ import annotations
@@ -91,12 +91,15 @@ def state_excess(x: Scalar, v: Scalar, x_min: Scalar, x_max: Scalar, v_max: Scal
 
 
 def acceleration_bounds(
-    x: Scalar, v: Scalar, x_min: Scalar, x_max: Scalar, v_max: Scalar, accel_limit: Scalar, braking: Scalar, dt: float
+    x: Scalar, v: Scalar, x_min: Scalar, x_max: Scalar, v_max: Scalar, accel_limit: Scalar, braking: Scalar, dt: float,
+    envelope: tuple[float, float, float] | None = None,
 ) -> tuple[Bound, Bound]:
     """(lower, upper) bounds on the acceleration of a coordinate for the next control period.
 
     x and v are the state (CasADi expressions or numbers); the limits are numbers, ±inf where
-    there is none, or run-time parameters. The bounds are clipped to ±_HUGE, so they are finite even without any limit.
+    there is none, or run-time parameters. `envelope`: the compiled (x_min, x_max, v_max) that
+    run-time parameters narrow (default: the limits themselves). The bounds are clipped to ±_HUGE,
+    so they are finite even without any limit.
     """
     inf = float("inf")
     upper = ca.SX(inf)
@@ -113,16 +116,29 @@ def acceleration_bounds(
         upper = ca.fmin(ca.fmax(upper, slowest), fastest)
         lower = ca.fmin(ca.fmax(lower, slowest), fastest)
     if _limited(accel_limit):
-        # The acceleration limit bounds the command, not what the position and velocity terms
-        # demand to bring the state back: where they ask to brake harder than the limit (a
-        # state beyond its velocity or position bound, or no longer viable), its other side gives
-        # way to that demand exactly, as little as it needs. Capped at the limit instead, the
-        # braking lost to any unmodelled acceleration beyond it: a 0.01 Nm bias in the measured
-        # external torque of a light wrist (xArm7, 73 rad/s² against a 20 rad/s² limit) ran it to
-        # 73 × its velocity limit, and a UR5's elbow stayed 3 rad beyond its position limit 1.3 s
-        # after a push, braking at 15 of the 150 Nm it had.
-        upper = ca.fmin(upper, accel_limit)
-        lower = ca.fmax(lower, -accel_limit)
+        # The acceleration limit bounds the command, but gives way to the braking that takes the
+        # state back within its compiled envelope: beyond it by Δv or Δx, by up to Δv/dt + 2Δx/dt²,
+        # the acceleration that removes the excess in one period (as little as the position and
+        # velocity terms need; the torque limits decide the rest, through the relaxation). Capped
+        # at the limit, the braking lost to any unmodelled acceleration beyond it: a 0.01 Nm bias
+        # in the measured external torque of a light wrist (xArm7, 73 rad/s² against a 20 rad/s²
+        # limit) ran it to 73 × its velocity limit, and a UR5's elbow stayed 3 rad beyond its
+        # position limit 1.3 s after a push, braking at 15 of the 150 Nm it had. Within the
+        # envelope the limit holds: a limit lowered at run time below the state is reached braking
+        # at it (given way to, its one-period demand kicked an xArm7's torque by 1.4 × its limit,
+        # at a parameter change the ramp is there to smooth). The give is 0 at the envelope and
+        # grows continuously beyond it.
+        low_env, high_env, v_env = envelope if envelope is not None else (x_min, x_max, v_max)
+        give_down, give_up = ca.SX(0.0), ca.SX(0.0)  # (braking allowed beyond the limit: of upper, of lower)
+        if _limited(v_env):
+            give_down += ca.fmax(v - v_env, 0.0) / dt
+            give_up += ca.fmax(-v - v_env, 0.0) / dt
+        if _limited(high_env):
+            give_down += 2.0 * ca.fmax(x - high_env, 0.0) / dt**2
+        if _limited(low_env):
+            give_up += 2.0 * ca.fmax(low_env - x, 0.0) / dt**2
+        upper = ca.fmin(ca.fmax(upper, -accel_limit - give_down), accel_limit)
+        lower = ca.fmax(ca.fmin(lower, accel_limit + give_up), -accel_limit)
         lower = ca.if_else(upper < -accel_limit, ca.fmin(lower, upper), lower)
         upper = ca.if_else(lower > accel_limit, ca.fmax(upper, lower), upper)
     upper = ca.fmin(ca.fmax(upper, -_HUGE), _HUGE)
