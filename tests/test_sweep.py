@@ -292,6 +292,38 @@ def test_a_killed_campaign_resumes(spec_file, tmp_path) -> None:
     assert all(_without_timing(rows[i]) == _without_timing(stopped[i]) for i in stopped)
 
 
+def test_a_stop_that_lands_in_casadi_ends_the_campaign_not_the_sample(spec_file, campaign_file, monkeypatch) -> None:
+    """SIGTERM's SystemExit, raised while CasADi's C code runs, reaches the sample as a SystemError:
+    it was recorded as that sample's error and the campaign ran on to its end (exit 0: the killed
+    campaign test above failed now and then under load). Now the stop ends the campaign."""
+    from dcts_spec import files
+    from dcts_spec.campaign import runner as runner_module
+
+    class Closable:
+        def __init__(self, _bundle) -> None:
+            pass
+
+        def close(self) -> None:
+            pass
+
+    def simulation_interrupted_in_casadi(*_args) -> None:
+        files.request_stop(signal.SIGTERM)  # (what the CLI's handler records before its SystemExit)
+        try:
+            raise SystemExit(128 + signal.SIGTERM)
+        except SystemExit:
+            raise SystemError("<function DM.__array__> returned a result with an exception set") from None
+
+    monkeypatch.setattr(files, "_stop_signal", None)
+    monkeypatch.setattr(runner_module, "CompiledController", Closable)
+    monkeypatch.setattr(runner_module, "Simulation", simulation_interrupted_in_casadi)
+    monkeypatch.setattr(SampleRunner, "bundle", lambda self, *args: None)
+    runner = SampleRunner(CampaignInputs(str(spec_file), spec_file.read_text(), str(campaign_file),
+                                         campaign_file.read_text(), "unused"))
+    with pytest.raises(SystemExit) as stopped:
+        runner.run(0)
+    assert stopped.value.code == 128 + signal.SIGTERM
+
+
 def test_a_changed_campaign_is_refused_at_its_file(spec_file, campaign_file, serial_run, tmp_path) -> None:
     changed = tmp_path / "campaign.yaml"
     changed.write_text(CAMPAIGN.replace("seed: 11", "seed: 12"))

@@ -14,6 +14,7 @@ from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Any, Protocol
 
+from ..files import stop_signal
 from .runner import CampaignInputs, SampleRunner
 
 IN_FLIGHT = 2  # samples queued per Ray worker: it never waits for the driver between samples
@@ -54,6 +55,8 @@ class SerialPool:
 
     def map(self, indices: list[int], parameters: dict[str, Any] | None = None) -> Iterator[dict[str, Any]]:
         for index in indices:
+            if (signum := stop_signal()) is not None:  # (a stop whose exception was lost: files.request_stop)
+                raise SystemExit(128 + signum)
             start = time.perf_counter()
             row = self.runner.run(index, parameters)
             self.throughput.seconds += time.perf_counter() - start

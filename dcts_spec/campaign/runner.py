@@ -17,6 +17,7 @@ from typing import Any
 from ..analysis.run import analyze
 from ..codegen import BundleCache
 from ..codegen.loader import CompiledController
+from ..files import stop_signal
 from ..formulations import ControlProblem, build_problem
 from ..sim.mismatch import scaled_robot
 from ..sim.runner import Simulation
@@ -104,6 +105,10 @@ class SampleRunner:
             self._problem = self._problem or build_problem(spec, report.robot)
             result = analyze(sim, log, problem=self._problem)
         except Exception:  # a bug: recorded with its traceback, the campaign goes on
+            if (signum := stop_signal()) is not None:
+                # a SIGTERM whose SystemExit landed in CasADi's C code arrives as a SystemError:
+                # it was recorded as this sample's error, and the campaign ran to its end
+                raise SystemExit(128 + signum) from None
             return row | {"status": "error", "error": traceback.format_exc(limit=8)}
         finally:
             runtime.close()
