@@ -39,3 +39,19 @@ def test_a_spec_with_collisions_compiles_and_passes_its_golden_check(tmp_path: P
     assert sum(name.startswith("collision:") for name in report.manifest["bound_names"]) == 20 + 3 * 7
     counts = dict(re.findall(r"(ok|relaxed|solver failed|invalid) (\d+)", host["test_summary"]))
     assert int(counts["ok"]) > 0 and counts["solver failed"] == "0" and counts["invalid"] == "0", host["test_summary"]
+
+
+def test_the_header_lists_the_pairs_and_the_order_of_relaxed(tmp_path: Path) -> None:
+    """A firmware engineer reading info->relaxed[i] finds which bound i is, and each pair's
+    minimum distance, in the header (they were in manifest.json only). An obstacle's name is free
+    text: one with a comment's end in it stays inside the comment."""
+    spec = tmp_path / "collision.yaml"
+    spec.write_text(SPEC.replace("      floor:", "      'floor*/':"))
+    report = compile_bundle(spec, tmp_path / "bundle", build=False)
+    header = (tmp_path / "bundle" / "collision_bundle.h").read_text()
+    assert " *   link7-ball: distance ≥ 0.02 m; braking at 5 m/s²" in header
+    listed = re.search(r"info->relaxed\[i\], .*? in this order: (.*?)\.\n", header, re.S).group(1)
+    entries = [e.strip() for e in listed.replace("\n *", " ").split(", ")]
+    assert entries == [f"{i}:{name.split(':', 1)[1].replace('*/', '*' + chr(92) + '/')}"
+                       for i, name in enumerate(report.manifest["bound_names"])]
+    assert "7:link1-ball" in entries and "floor*" + chr(92) + "/" in header and "floor*/" not in header

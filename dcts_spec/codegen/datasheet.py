@@ -16,6 +16,7 @@ from ..formulations.parameters import ParameterInput
 from ..parameter_ramp import ramp_steps
 from ..limits.joint import DEFAULT_BRAKING
 from ..limits.naming import interval_text, joint_unit
+from ..robot.collision import resolve_collision
 from ..robot.resolve import locked_joints
 from ..tasks import JointTask, Task
 from ..tasks.base import unit_text
@@ -235,7 +236,27 @@ def _cell(value: float, unit: str) -> str:
 
 
 def limits_text(controller: Controller) -> str:
-    """The joint limits table and the Cartesian bounds."""
+    """The joint limits table, the Cartesian bounds, the collision pairs and which bound each
+    entry of info->relaxed is."""
+    lines = [_joint_and_cartesian_text(controller)]
+    pairs = resolve_collision(controller.spec, controller.robot)[0].pairs
+    if pairs:
+        lines.append(" * Collision pairs (the distance between two bodies' primitives, m; braking in m/s²):")
+        lines += [f" *   {_short(p.name)}: distance ≥ {number(p.min_distance)} m; braking at {number(p.braking)} m/s²"
+                  for p in pairs]
+    if controller.nx and controller.bound_names:  # (a closed form has no bound rows)
+        order = ", ".join(f"{i}:{_short(name)}" for i, name in enumerate(controller.bound_names))
+        lines += wrap(f"info->relaxed[i], one per joint, Cartesian and collision bound, in this order: {order}.")
+    return "\n".join(lines)
+
+
+def _short(row_name: str) -> str:
+    """A bound row's name without its kind (joint1, tool.z, link7-ball), safe in a C comment (an
+    obstacle's name is the spec's free text)."""
+    return row_name.split(":", 1)[1].replace("*/", "*\\/")
+
+
+def _joint_and_cartesian_text(controller: Controller) -> str:
     lim, names = controller.robot.limits, controller.robot.joint_names
     how = _ENFORCEMENT.get(controller.formulation, _QP_ENFORCEMENT)
     lines = wrap(f"Limits, compiled ({how}; none: no limit):")
