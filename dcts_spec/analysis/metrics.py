@@ -85,6 +85,7 @@ def summarize(log: SimulationLog, series: TimeSeries, robot: Robot, priorities: 
     """The summary.json metrics of a run (see the module docstring for the definitions)."""
     lim = robot.limits
     velocity_excess = _excess(np.abs(log.dq), lim.v_max)
+    position_excess = np.maximum(_excess(log.q, lim.q_max), _excess(-log.q, -lim.q_min))
     acceleration_errors = {str(p): _mean_norm(series.acceleration_errors[p]) for p in priorities}
     waypoints = log.waypoint_times
     disturbance = log.tau_ext_true + series.payload_torque
@@ -94,7 +95,7 @@ def summarize(log: SimulationLog, series: TimeSeries, robot: Robot, priorities: 
         "steps": log.steps,
         "completed": log.diverged_at is None,
         "diverged_at": log.diverged_at,
-        "max_joint_position_violation": _peak(np.maximum(_excess(log.q, lim.q_max), _excess(-log.q, -lim.q_min))),
+        "max_joint_position_violation": _peak(position_excess),
         "max_joint_velocity_violation": _peak(velocity_excess),
         "max_joint_velocity_violation_ratio": _peak(velocity_excess / lim.v_max),
         "max_torque_violation": _peak(_excess(np.abs(log.tau), lim.tau_max)),
@@ -106,7 +107,7 @@ def summarize(log: SimulationLog, series: TimeSeries, robot: Robot, priorities: 
         "joint_acceleration_limits": bool(np.isfinite(lim.a_max).any()),
         "solver_failures": int(np.count_nonzero(log.status < 0)),
         "limits_relaxed": int(np.count_nonzero(log.status == STATUS_LIMITS_RELAXED)),
-        "relaxed_bounds": _relaxed_bounds(log, robot, collision),
+        "relaxed_bounds": _relaxed_bounds(log, robot, collision, position_excess, velocity_excess),
         "min_scaling": _peak(log.scaling, np.min, default=1.0),
         "min_scaling_at": _min_scaling_at(log, series, priorities),
         "task_error_quantity": {t: "damping (velocity error)" if t in series.damping else "tracking error"
@@ -168,9 +169,11 @@ def _min_scaling_at(log: SimulationLog, series: TimeSeries, priorities: list[int
     return {"priority": priority, "tasks": list(series.level_tasks.get(priority, ())), "time": float(log.time[k])}
 
 
-def _relaxed_bounds(log: SimulationLog, robot: Robot, collision: CollisionModel | None) -> dict[str, dict[str, Any]]:
+def _relaxed_bounds(log: SimulationLog, robot: Robot, collision: CollisionModel | None, position_excess: np.ndarray,
+                    velocity_excess: np.ndarray) -> dict[str, dict[str, Any]]:
     """Each bound that gave way: the bound as text, how many steps, the first and last time (s);
-    for a joint, which of its limits the state was beyond in those steps (one row holds both)."""
+    for a joint, which of its limits the state was beyond in those steps (one row holds both),
+    from the (samples, joints) excesses over its position and velocity limits."""
     out = {}
     rows = {joint_row_name(joint): j for j, joint in enumerate(robot.joint_names)}
     for r, name in enumerate(log.bound_names):
@@ -179,16 +182,14 @@ def _relaxed_bounds(log: SimulationLog, robot: Robot, collision: CollisionModel 
             out[name] = {"bound": row_text(robot, name, collision), "steps": int(steps.size),
                          "first": float(log.time[steps[0]]), "last": float(log.time[steps[-1]])}
             if name in rows:
-                out[name]["beyond"] = _joint_beyond(log, robot, rows[name], steps)
+                j = rows[name]
+                out[name]["beyond"] = _joint_beyond(_peak(position_excess[steps, j]), _peak(velocity_excess[steps, j]),
+                                                    joint_unit(robot, j))
     return out
 
 
-def _joint_beyond(log: SimulationLog, robot: Robot, j: int, steps: np.ndarray) -> str:
-    """Which of joint j's limits its state was beyond in `steps`, and by how much at most, as text."""
-    lim, unit = robot.limits, joint_unit(robot, j)
-    q, dq = log.q[steps, j], log.dq[steps, j]
-    position = _peak(np.maximum(_excess(q, lim.q_max[j]), _excess(-q, -lim.q_min[j])))
-    velocity = _peak(_excess(np.abs(dq), lim.v_max[j]))
+def _joint_beyond(position: float, velocity: float, unit: str) -> str:
+    """Which of a joint's limits its state was beyond, and by how much at most, as text."""
     parts = [f"its {what} limit by up to {by:.3g} {u}" for what, by, u in
              (("position", position, unit), ("velocity", velocity, per(unit, "s"))) if by > 0.0]
     return " and ".join(parts) if parts else "none of its limits (the braking it asked for was more than the torques give)"
