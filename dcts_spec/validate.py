@@ -399,6 +399,7 @@ def _levels(spec: Spec, robot: Robot, q: np.ndarray) -> tuple[list[LevelReport],
     stacked = np.zeros((0, robot.nv))
     priorities = spec.priority_levels
     asked = 0  # directions the levels so far ask for
+    conflicting = []  # levels above the lowest that conflict with the higher ones at q (only here?)
     for p in priorities:
         rows, entries = [], []
         for task_spec in spec.tasks_at(p):
@@ -432,14 +433,18 @@ def _levels(spec: Spec, robot: Robot, q: np.ndarray) -> tuple[list[LevelReport],
                     f"priority {p} asks for {level.dimension} directions, and with the higher priorities "
                     f"{asked} of the robot's {robot.nv} joints' directions: only the lowest priority may be "
                     "over-constrained (give these tasks the lowest priority, or fewer axes)"))
-            elif (structure_error := _over_constrained_everywhere(spec, robot)) is not None:
-                diags.append(spec.source.diagnostic(spec.priority_path(structure_error.priority), str(structure_error)))
             else:
-                diags.append(spec.source.diagnostic(
-                    spec.priority_path(p),
-                    f"priority {p} asks for {level.dimension} directions but only {level.rank} are free of higher "
-                    "priorities at the initial configuration; only the lowest priority may be over-constrained",
-                    "warning"))
+                conflicting.append(level)
+    if conflicting:  # (compile's own check, once, whichever levels conflict here)
+        structure_error = _over_constrained_everywhere(spec, robot)
+        if structure_error is not None:
+            diags.append(spec.source.diagnostic(spec.priority_path(structure_error.priority), str(structure_error)))
+        else:
+            diags += [spec.source.diagnostic(
+                spec.priority_path(level.priority),
+                f"priority {level.priority} asks for {level.dimension} directions but only {level.rank} are free of "
+                "higher priorities at the initial configuration; only the lowest priority may be over-constrained",
+                "warning") for level in conflicting]
     return levels, diags
 
 
