@@ -598,3 +598,32 @@ def test_a_level_left_no_direction_is_damped_not_inverted():
     rng = np.random.default_rng(4)
     near = [with_elbow.step(q0 + rng.uniform(-1e-6, 1e-6, 7), rng.uniform(-1e-3, 1e-3, 7)).status for _ in range(30)]
     assert min(near) >= 0, near
+
+
+@pytest.mark.parametrize("robot", FALLBACK_ROBOTS)
+def test_beyond_its_velocity_limit_a_joint_brakes_under_an_acceleration_limit(robot):
+    """Random states of three robots with a 10 rad/s² acceleration limit and one joint beyond its
+    velocity limit by 0.5–50 % (≥ 0.5 % is ≥ a_max·dt for these limits): no step falls back, none
+    says "ok", and that joint's actual acceleration (Pinocchio's dynamics of the returned torque)
+    brakes it by at least the acceleration limit or as hard as its torque limit allows (the bound
+    demands more than a_max there: the limit gives way to the way back)."""
+    base = spec_text("X", "  - {name: damping, type: joint, priority: 1, gains: {kp: 0, kd: 5}}",
+                     limits="  joint_acceleration: {max: 10}", name=f"braking_{robot}")
+    key, line = ("urdf", UR5_URDF) if robot == "ur5" else ("model", robot)
+    c = _controller(base.replace("robot: {model: X}", f"robot: {{{key}: {line}}}"))
+    lim = c.robot.limits
+    rng = np.random.default_rng(21)
+    braked_at_limit = 0
+    for q, dq in _random_states(c, 40, seed=9):
+        q = np.clip(q, lim.q_min + 0.2, lim.q_max - 0.2)  # (the velocity bound alone in play)
+        j = int(rng.integers(c.n))
+        sign = 1.0 if rng.random() < 0.5 else -1.0
+        dq[j] = sign * lim.v_max[j] * (1.0 + rng.uniform(5e-3, 0.5))
+        r = c.step(q, dq)
+        assert r.status == 1 and f"joint:{c.robot.joint_names[j]}" in r.relaxed, (r.status, r.relaxed)
+        a = _accel(c, q, dq, r.tau)
+        braking = -sign * a[j]
+        at_torque_limit = np.any(np.abs(r.tau) >= lim.tau_max * (1 - 1e-6))
+        assert braking >= lim.a_max[j] * (1 - 1e-6) or at_torque_limit, (j, dq[j], braking, r.tau)
+        braked_at_limit += braking > lim.a_max[j] * 1.01
+    assert braked_at_limit >= 10  # (the premise: beyond a_max, where it was capped at a_max before)
