@@ -393,7 +393,7 @@ def test_plots_label_their_axes_and_keep_honest_scales(case) -> None:
     assert errors[3].get_title() == "rest — damping (velocity error)"
     assert all("limits relaxed" in ax.get_legend_handles_labels()[1] for ax in errors)
 
-    positions = joint_figure(run, run.log.q, run.robot.limits.q_min, run.robot.limits.q_max, "q", "")
+    positions = joint_figure(run, run.log.q, run.series.limits.joint.q_min, run.series.limits.joint.q_max, "q", "")
     labels = [ax.get_legend_handles_labels()[1] for ax in positions.axes if ax.get_visible()]
     assert labels[0] == ["bound relaxed"] and not any(labels[1:])  # joint1 only
     assert positions.axes[1].get_ylabel() == "q [rad]"

@@ -157,7 +157,7 @@ def velocity_ratio_overlay(runs: Sequence[RunResult]) -> Figure:
     figure = Figure(figsize=(9, 3.2), layout="constrained")
     ax = figure.subplots()
     for run in runs:
-        ax.plot(run.log.time, np.max(np.abs(run.log.dq) / run.robot.limits.v_max, axis=1), lw=1.0, label=run.label)
+        ax.plot(run.log.time, np.max(np.abs(run.log.dq) / run.series.limits.joint.v_max, axis=1), lw=1.0, label=run.label)
     ax.axhline(1.0, color="#d62728", ls="--", lw=0.8)
     ax.set_xlabel("time [s]")
     ax.set_ylabel("max_j |q̇_j| / q̇_max,j [1]")

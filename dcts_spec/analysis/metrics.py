@@ -1,6 +1,8 @@
 """The summary of a run: limit violations, task errors, energies, solver health, speed.
 
-Definitions (N samples t_k = k T; violations are 0 when a limit holds or does not exist):
+Definitions (N samples t_k = k T; violations are 0 when a limit holds or does not exist; a limit
+is the one in force at the sample: the compiled value, or the run-time parameter the controller
+applied then, ramps included):
 - max_joint_position_violation = max_{k,j} max(0, q_j − q_max,j, q_min,j − q_j), rad
 - max_joint_velocity_violation = max_{k,j} max(0, |q̇_j| − q̇_max,j), rad/s; `_ratio`: over q̇_max,j
 - max_torque_violation = max_{k,j} max(0, |τ_j| − τ_max,j), Nm (τ as applied)
@@ -50,10 +52,11 @@ from typing import Any
 import numpy as np
 
 from ..controller import STATUS_LIMITS_RELAXED
+from ..formulations.parameters import LimitsInForce
 from ..limits.collision import distance_function
-from ..limits.naming import joint_row_name, joint_unit, row_text
+from ..limits.naming import cartesian_row_name, joint_row_name, joint_unit, row_text
 from ..robot.collision import CollisionModel
-from ..robot.model import Robot
+from ..robot.model import CartesianBound, JointLimits, Robot
 from ..sim.log import SimulationLog
 from ..symbolic import SymbolicRobot
 from .series import TimeSeries
@@ -83,7 +86,7 @@ SUMMARY_KEYS = (
 def summarize(log: SimulationLog, series: TimeSeries, robot: Robot, priorities: list[int],
               collision: CollisionModel | None = None) -> dict[str, Any]:
     """The summary.json metrics of a run (see the module docstring for the definitions)."""
-    lim = robot.limits
+    lim = series.limits.joint
     velocity_excess = _excess(np.abs(log.dq), lim.v_max)
     position_excess = np.maximum(_excess(log.q, lim.q_max), _excess(-log.q, -lim.q_min))
     acceleration_errors = {str(p): _mean_norm(series.acceleration_errors[p]) for p in priorities}
@@ -101,13 +104,13 @@ def summarize(log: SimulationLog, series: TimeSeries, robot: Robot, priorities: 
         "max_torque_violation": _peak(_excess(np.abs(log.tau), lim.tau_max)),
         "max_cartesian_violation": _cartesian_violation(series, robot),
         "max_torque_jump": _peak(torque_jump),
-        "max_torque_jump_ratio": _peak(torque_jump / lim.tau_max),
-        "torque_jump_steps": int(np.count_nonzero((torque_jump > TORQUE_JUMP_FRACTION * lim.tau_max).any(axis=1))),
+        "max_torque_jump_ratio": _peak(torque_jump / lim.tau_max[1:]),
+        "torque_jump_steps": int(np.count_nonzero((torque_jump > TORQUE_JUMP_FRACTION * lim.tau_max[1:]).any(axis=1))),
         "max_commanded_acceleration": _peak(np.abs(log.ddq_commanded)),
         "joint_acceleration_limits": bool(np.isfinite(lim.a_max).any()),
         "solver_failures": int(np.count_nonzero(log.status < 0)),
         "limits_relaxed": int(np.count_nonzero(log.status == STATUS_LIMITS_RELAXED)),
-        "relaxed_bounds": _relaxed_bounds(log, robot, collision, position_excess, velocity_excess),
+        "relaxed_bounds": _relaxed_bounds(log, series, robot, collision, position_excess, velocity_excess),
         "min_scaling": _peak(log.scaling, np.min, default=1.0),
         "min_scaling_at": _min_scaling_at(log, series, priorities),
         "task_error_quantity": {t: "damping (velocity error)" if t in series.damping else "tracking error"
@@ -169,23 +172,60 @@ def _min_scaling_at(log: SimulationLog, series: TimeSeries, priorities: list[int
     return {"priority": priority, "tasks": list(series.level_tasks.get(priority, ())), "time": float(log.time[k])}
 
 
-def _relaxed_bounds(log: SimulationLog, robot: Robot, collision: CollisionModel | None, position_excess: np.ndarray,
-                    velocity_excess: np.ndarray) -> dict[str, dict[str, Any]]:
-    """Each bound that gave way: the bound as text, how many steps, the first and last time (s);
-    for a joint, which of its limits the state was beyond in those steps (one row holds both),
-    from the (samples, joints) excesses over its position and velocity limits."""
+def _relaxed_bounds(log: SimulationLog, series: TimeSeries, robot: Robot, collision: CollisionModel | None,
+                    position_excess: np.ndarray, velocity_excess: np.ndarray) -> dict[str, dict[str, Any]]:
+    """Each bound that gave way: the bound as text (as compiled, and as run-time parameters narrowed
+    it in those steps), how many steps, the first and last time (s); for a joint, which of its
+    limits the state was beyond in those steps (one row holds both), from the (samples, joints)
+    excesses over its position and velocity limits in force."""
     out = {}
-    rows = {joint_row_name(joint): j for j, joint in enumerate(robot.joint_names)}
+    joints = {joint_row_name(joint): j for j, joint in enumerate(robot.joint_names)}
+    bounds = {cartesian_row_name(b): i for i, b in enumerate(robot.cartesian_bounds)}
     for r, name in enumerate(log.bound_names):
         steps = np.flatnonzero(log.relaxed[:, r])
-        if steps.size:
-            out[name] = {"bound": row_text(robot, name, collision), "steps": int(steps.size),
-                         "first": float(log.time[steps[0]]), "last": float(log.time[steps[-1]])}
-            if name in rows:
-                j = rows[name]
-                out[name]["beyond"] = _joint_beyond(_peak(position_excess[steps, j]), _peak(velocity_excess[steps, j]),
-                                                    joint_unit(robot, j))
+        if not steps.size:
+            continue
+        text = row_text(robot, name, collision)
+        if name in joints:
+            narrowed = _narrowed_joint(robot, series.limits.joint, joints[name], steps)
+        elif name in bounds:
+            narrowed = _narrowed_cartesian(robot.cartesian_bounds[bounds[name]], series.limits, bounds[name], steps)
+        else:
+            narrowed = ""
+        out[name] = {"bound": text + (f" (narrowed at run time in those steps: {narrowed})" if narrowed else ""),
+                     "steps": int(steps.size), "first": float(log.time[steps[0]]), "last": float(log.time[steps[-1]])}
+        if name in joints:
+            j = joints[name]
+            out[name]["beyond"] = _joint_beyond(_peak(position_excess[steps, j]), _peak(velocity_excess[steps, j]),
+                                                joint_unit(robot, j))
     return out
+
+
+def _narrowed_joint(robot: Robot, limits: JointLimits, j: int, steps: np.ndarray) -> str:
+    """Joint j's limits that differ from the compiled ones in `steps`, as text ('' if none)."""
+    unit = joint_unit(robot, j)
+    force = "Nm" if unit == "rad" else "N"
+    quantities = (("q_min", "min position", unit), ("q_max", "max position", unit),
+                  ("v_max", "max velocity", per(unit, "s")), ("a_max", "max acceleration", per(unit, "s²")),
+                  ("tau_max", "max torque" if force == "Nm" else "max force", force))
+    return _narrowed(((what, getattr(limits, key)[steps, j], getattr(robot.limits, key)[j], u)
+                      for key, what, u in quantities))
+
+
+def _narrowed_cartesian(bound: CartesianBound, limits: LimitsInForce, i: int, steps: np.ndarray) -> str:
+    """A Cartesian bound's sides that differ from the compiled ones in `steps`, as text."""
+    return _narrowed((("min", limits.c_min[steps, i], bound.c_min, "m"), ("max", limits.c_max[steps, i], bound.c_max, "m")))
+
+
+def _narrowed(values) -> str:
+    """'what lo–hi unit' for each (what, values in force, compiled value, unit) whose values differ
+    from the compiled one."""
+    parts = []
+    for what, in_force, compiled, unit in values:
+        if np.any(in_force != compiled):
+            lo, hi = float(np.min(in_force)), float(np.max(in_force))
+            parts.append(f"{what} {lo:.4g} {unit}" if lo == hi else f"{what} {lo:.4g}–{hi:.4g} {unit}")
+    return ", ".join(parts)
 
 
 def _joint_beyond(position: float, velocity: float, unit: str) -> str:
@@ -247,10 +287,10 @@ def _rms_norm(errors: np.ndarray) -> float:
 
 
 def _cartesian_violation(series: TimeSeries, robot: Robot) -> float:
-    worst = 0.0
-    for b in robot.cartesian_bounds:
+    worst, limits = 0.0, series.limits
+    for i, b in enumerate(robot.cartesian_bounds):
         c = b.coordinate(series.frame_positions[b.frame])
-        worst = max(worst, _peak(np.maximum(_excess(c, np.array(b.c_max)), _excess(-c, -np.array(b.c_min)))))
+        worst = max(worst, _peak(np.maximum(_excess(c, limits.c_max[:, i]), _excess(-c, -limits.c_min[:, i]))))
     return worst
 
 

@@ -27,7 +27,7 @@ MIN_TORQUE_RANGE = 1.0  # Nm (N for a prismatic joint)
 
 def write_plots(run: RunResult, directory: Path) -> list[Path]:
     """Every plot of a run, as PNG files in `directory`; returns their paths."""
-    log, lim = run.log, run.robot.limits
+    log, lim = run.log, run.series.limits.joint  # (as run-time parameters set them)
     figures = {
         "joint_positions": joint_figure(run, log.q, lim.q_min, lim.q_max, "q", ""),
         "joint_velocities": joint_figure(run, log.dq, -lim.v_max, lim.v_max, "q̇", "s"),
@@ -64,19 +64,23 @@ def joint_grid(n: int, title: str) -> tuple[Figure, list[Axes]]:
     return figure, list(axes[:n])
 
 
-def shade_limits(ax: Axes, lower: float, upper: float, values: np.ndarray) -> None:
-    """Limit lines with the forbidden side shaded; the view keeps both data and limits."""
-    finite = [v for v in (lower, upper) if np.isfinite(v)]
+def shade_limits(ax: Axes, time: np.ndarray, lower: np.ndarray, upper: np.ndarray, values: np.ndarray) -> None:
+    """Limit lines with the forbidden side shaded, following the limits in force at each sample
+    (run-time parameters may narrow them); the view keeps both data and limits."""
+    finite = [float(v) for v in (*lower, *upper) if np.isfinite(v)]
     lo = min([float(np.min(values))] + finite) if values.size else min(finite, default=-1.0)
     hi = max([float(np.max(values))] + finite) if values.size else max(finite, default=1.0)
     margin = 0.08 * (hi - lo) or 1.0
     bottom, top = lo - margin, hi + margin
-    if np.isfinite(upper):
-        ax.axhspan(upper, top, color=LIMIT_COLOR, alpha=0.12, lw=0)
-        ax.axhline(upper, color=LIMIT_COLOR, lw=0.8, ls="--")
-    if np.isfinite(lower):
-        ax.axhspan(bottom, lower, color=LIMIT_COLOR, alpha=0.12, lw=0)
-        ax.axhline(lower, color=LIMIT_COLOR, lw=0.8, ls="--")
+    for limit, edge in ((upper, top), (lower, bottom)):
+        if not limit.size or not np.isfinite(limit).all():
+            continue  # (a limit is finite at every sample or at none: parameters only narrow one that exists)
+        if np.all(limit == limit[0]):
+            ax.axhspan(min(limit[0], edge), max(limit[0], edge), color=LIMIT_COLOR, alpha=0.12, lw=0)
+            ax.axhline(limit[0], color=LIMIT_COLOR, lw=0.8, ls="--")
+        else:
+            ax.fill_between(time, limit, edge, step="post", color=LIMIT_COLOR, alpha=0.12, lw=0)
+            ax.step(time, limit, where="post", color=LIMIT_COLOR, lw=0.8, ls="--")
     ax.set_ylim(bottom, top)
 
 
@@ -105,13 +109,13 @@ def relaxed_steps(run: RunResult, row_name: str) -> np.ndarray:
 
 def joint_figure(run: RunResult, values: np.ndarray, lower: np.ndarray, upper: np.ndarray,
                  symbol: str, per_time: str | None) -> Figure:
-    """One axes per joint with its limits shaded and the steps its bound gave way marked;
-    `per_time` as in `joint_quantity_unit`."""
+    """One axes per joint with its limits shaded and the steps its bound gave way marked; `lower`,
+    `upper` (samples, joints): the limits in force; `per_time` as in `joint_quantity_unit`."""
     names = run.robot.joint_names
     figure, axes = joint_grid(len(names), f"{symbol} per joint, limits shaded — {run.label}")
     for j, ax in enumerate(axes):
         ax.plot(run.log.time, values[:, j], lw=1.0)
-        shade_limits(ax, lower[j], upper[j], values[:, j])
+        shade_limits(ax, run.log.time, lower[:, j], upper[:, j], values[:, j])
         ax.set_ylabel(f"{symbol} [{joint_quantity_unit(run, j, per_time)}]")
         ax.set_title(names[j], fontsize=9)
         mark_steps(ax, run.log.time, relaxed_steps(run, joint_row_name(names[j])), "bound relaxed")
@@ -268,12 +272,17 @@ def path_figure(runs: Sequence[RunResult]) -> Figure:
                     p = run.series.frame_positions[frame][relaxed]
                     ax.plot(p[:, a], p[:, b], ".", ms=3, color=RELAXED_COLOR,
                             label="bound relaxed" if len(runs) == 1 else f"{run.label}: bound relaxed")
-            for bound in first.robot.cartesian_bounds:
+            limits = first.series.limits
+            for i, bound in enumerate(first.robot.cartesian_bounds):
                 if bound.frame == frame and bound.axis in (a, b):
                     draw = ax.axvline if bound.axis == a else ax.axhline
-                    for c in (bound.c_min, bound.c_max):
+                    # as compiled (dashed) and, dotted, the narrowest a run-time parameter made it
+                    for c, narrowest in ((bound.c_min, np.max(limits.c_min[:, i], initial=-np.inf)),
+                                         (bound.c_max, np.min(limits.c_max[:, i], initial=np.inf))):
                         if np.isfinite(c):
                             draw(c, color=LIMIT_COLOR, ls="--", lw=0.8)
+                        if narrowest != c:
+                            draw(narrowest, color=LIMIT_COLOR, ls=":", lw=0.8)
             ax.set_xlabel(f"{'xyz'[a]} [m]")
             ax.set_ylabel(f"{'xyz'[b]} [m]")
             # One scale for the three views, so that their distances compare.

@@ -20,6 +20,7 @@ import numpy as np
 import pinocchio as pin
 
 from ..formulations import ControlProblem, build_problem
+from ..formulations.parameters import LimitsInForce, limits_in_force
 from ..robot.model import Robot
 from ..sim.log import SimulationLog
 from ..spec import Spec
@@ -46,6 +47,7 @@ class TimeSeries:
     task_units: dict[str, str]  # task → unit of its task_errors rows ("m", "rad", "rad/s", "m, rad")
     level_tasks: dict[int, tuple[str, ...]]  # priority → its tasks
     level_units: dict[int, str]  # priority → unit of its rows' positions (accelerations: per s²)
+    limits: LimitsInForce  # the limits each sample was held to: the compiled ones, as run-time parameters set them
 
     def arrays(self) -> dict[str, np.ndarray]:
         """Flat name → array, for saving next to the log."""
@@ -77,12 +79,12 @@ def evaluate(spec: Spec, robot: Robot, log: SimulationLog, problem: ControlProbl
         "J": ca.reshape(jacobian, jacobian.numel(), 1),
     }
     function = ca.Function("series", [problem.q, problem.dq, problem.ref, problem.param, a], list(outputs.values()))
+    param = log.param if log.param.shape == (samples, problem.param.shape[0]) else np.tile(
+        problem.param_layout.defaults, (samples, 1))  # (a log from before run-time parameters)
     if samples == 0:
         values = [np.zeros((samples, int(v.numel()))) for v in outputs.values()]
     else:
         mapped = function.map(samples, "thread", 2)
-        param = log.param if log.param.shape == (samples, problem.param.shape[0]) else np.tile(
-            problem.param_layout.defaults, (samples, 1))  # (a log from before run-time parameters)
         values = [np.array(v).T for v in mapped(log.q.T, log.dq.T, log.ref.T, param.T, log.ddq.T)]
     out = dict(zip(outputs, values, strict=True))
 
@@ -115,7 +117,8 @@ def evaluate(spec: Spec, robot: Robot, log: SimulationLog, problem: ControlProbl
     payloads = spec.scenario.payloads if spec.scenario is not None else []
     return TimeSeries(task_errors, acceleration_errors, positions, kinetic, task_kinetic,
                       kinetic - task_kinetic, acceleration_energy, payload_torque(robot, payloads, log),
-                      tuple(damping), units, level_tasks, level_units)
+                      tuple(damping), units, level_tasks, level_units,
+                      limits_in_force(problem.param_layout, param, robot))
 
 
 def _pure_damping(task: Task) -> bool:

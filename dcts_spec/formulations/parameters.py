@@ -17,7 +17,7 @@ import casadi as ca
 import numpy as np
 
 from ..limits.naming import joint_unit
-from ..robot.model import Robot
+from ..robot.model import JointLimits, Robot
 from ..spec import Spec
 from ..spec.parameters import ParametersSpec
 from ..tasks import Task
@@ -155,6 +155,55 @@ def _is_limit(e: ParameterInput) -> bool:
     return e.name.startswith(("joint_", "cartesian."))
 
 
+# The joint limit each run-time limit entry replaces (a JointLimits field).
+_JOINT_LIMIT_ENTRIES = {"joint_position.min": "q_min", "joint_position.max": "q_max",
+                        "joint_velocity.max": "v_max", "joint_acceleration.max": "a_max",
+                        "joint_torque.max": "tau_max"}
+
+
+def cartesian_labels(robot: Robot) -> list[str]:
+    """The run-time parameter label of each Cartesian bound, `frame.axis` (an index appended to a
+    repeated one)."""
+    labels: list[str] = []
+    for i, bound in enumerate(robot.cartesian_bounds):
+        label = f"{bound.frame}.{bound.label}"
+        labels.append(label if label not in labels else f"{label}{i}")
+    return labels
+
+
+@dataclass(frozen=True)
+class LimitsInForce:
+    """The limits each sample of a run was held to: the compiled ones where no run-time parameter
+    narrowed them. `joint`'s arrays are (samples, joints); `c_min`, `c_max` (samples, Cartesian
+    bounds)."""
+
+    joint: JointLimits
+    c_min: np.ndarray
+    c_max: np.ndarray
+
+
+def limits_in_force(layout: ParameterLayout, values: np.ndarray, robot: Robot) -> LimitsInForce:
+    """The limits at each sample of `values` (samples, layout.size): the run-time parameters as the
+    controller applied them (ramps included)."""
+    samples = len(values)
+    compiled = robot.limits
+    joint = {key: np.tile(getattr(compiled, key), (samples, 1)) for key in _JOINT_LIMIT_ENTRIES.values()}
+    bounds = robot.cartesian_bounds
+    c_min = np.tile(np.array([b.c_min for b in bounds], dtype=float), (samples, 1))
+    c_max = np.tile(np.array([b.c_max for b in bounds], dtype=float), (samples, 1))
+    joints = {name: j for j, name in enumerate(robot.joint_names)}
+    labels = {label: i for i, label in enumerate(cartesian_labels(robot))}
+    for e in layout.entries:
+        if e.name in _JOINT_LIMIT_ENTRIES:
+            target = joint[_JOINT_LIMIT_ENTRIES[e.name]]
+            for k, name in enumerate(e.components):
+                target[:, joints[name]] = values[:, e.offset + k]
+        elif e.name.startswith("cartesian."):
+            target = c_min if e.name.endswith(".min") else c_max
+            target[:, labels[e.components[0]]] = values[:, e.offset]
+    return LimitsInForce(JointLimits(**joint), c_min, c_max)
+
+
 @dataclass
 class ParameterSymbols:
     """The `param` input, its layout, and the symbolic values that replace compiled ones."""
@@ -268,11 +317,7 @@ def build_parameters(spec: Spec, robot: Robot, tasks: list[Task]) -> ParameterSy
                 torque_index[j] = b.size - len(kept) + k
         out.joint[key] = values
     if "cartesian" in groups:
-        seen: set[str] = set()
-        for i, bound in enumerate(robot.cartesian_bounds):
-            label = f"{bound.frame}.{bound.label}"
-            label = label if label not in seen else f"{label}{i}"
-            seen.add(label)
+        for bound, label in zip(robot.cartesian_bounds, cartesian_labels(robot), strict=True):
             low = bound.c_min if np.isfinite(bound.c_min) else -FAR
             high = bound.c_max if np.isfinite(bound.c_max) else FAR
             sides, index = [], {}
