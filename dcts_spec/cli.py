@@ -130,6 +130,14 @@ def _positive(value: Optional[float]) -> Optional[float]:
     return value
 
 
+def _path(text: str) -> Path:
+    """An output path option's value. An empty one (an unset shell variable: `-o "$OUT"`) would
+    otherwise be the current folder."""
+    if not text.strip():
+        raise typer.BadParameter("an empty path; give a folder or file name")
+    return Path(text)
+
+
 def _duration(value: Optional[float]) -> Optional[float]:
     """`--duration`: the range `scenario.duration` has (inf or 1e9 s ran out of memory)."""
     from .spec.types import DURATION
@@ -162,7 +170,7 @@ def _out_help(command_name: str) -> str:
     return f"output folder (default: {_OUT_DEFAULTS[command_name]}, <name> being the spec's `name`)"
 
 
-OldOutput = Annotated[Optional[Path], typer.Option("--output", hidden=True, help="old spelling of --out")]
+OldOutput = Annotated[Optional[Path], typer.Option("--output", hidden=True, parser=_path, metavar="PATH", help="old spelling of --out")]
 FormulationOption = Annotated[Optional[Formulation], typer.Option(help="override controller.formulation")]
 RuntimeOption = Annotated[Runtime, typer.Option(
     help="controller in the loop: c (the generated C bundle) or python (CasADi from Python)")]
@@ -224,7 +232,7 @@ def validate(
 
 @command()
 def schema(
-    out: Annotated[Optional[Path], typer.Option("--out", "-o", help="write the schema to this file instead of "
+    out: Annotated[Optional[Path], typer.Option("--out", "-o", parser=_path, metavar="PATH", help="write the schema to this file instead of "
                                                 "printing it (a file there is replaced only if it is a dcts "
                                                 "schema)")] = None,
     output: OldOutput = None,
@@ -260,13 +268,13 @@ def _is_our_schema(path: Path, schema_id: str) -> bool:
 @command()
 def simulate(
     file: Annotated[Path, typer.Argument(help="spec file with a `scenario` section")],
-    out: Annotated[Optional[Path], typer.Option("--out", "-o", help=_out_help("simulate"))] = None,
+    out: Annotated[Optional[Path], typer.Option("--out", "-o", parser=_path, metavar="PATH", help=_out_help("simulate"))] = None,
     runtime: RuntimeOption = "c",
     formulation: FormulationOption = None,
     duration: DurationOption = None,
     plots: Annotated[bool, typer.Option("--plots/--no-plots", help="write the PNG plots")] = True,
     viewer: Annotated[bool, typer.Option("--viewer", help="watch the run in MuJoCo's viewer (needs a display)")] = False,
-    video: Annotated[Optional[Path], typer.Option(help="render the run offscreen to this MP4 file")] = None,
+    video: Annotated[Optional[Path], typer.Option(parser=_path, metavar="PATH", help="render the run offscreen to this MP4 file")] = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="no progress messages or bar, no summary")] = False,
     cache: CacheOption = True,
 ) -> None:
@@ -288,7 +296,7 @@ def compare(
     file: Annotated[Path, typer.Argument(help="spec file with a `scenario` section")],
     formulations: Annotated[str, typer.Option(
         callback=_formulation_list, help=f"comma-separated formulations to run, from {', '.join(FORMULATIONS)}")] = "dcts,osc,qp_md",
-    out: Annotated[Optional[Path], typer.Option("--out", "-o", help=_out_help("compare"))] = None,
+    out: Annotated[Optional[Path], typer.Option("--out", "-o", parser=_path, metavar="PATH", help=_out_help("compare"))] = None,
     runtime: RuntimeOption = "c",
     duration: DurationOption = None,
     plots: Annotated[bool, typer.Option("--plots/--no-plots", help="write the overlay plots")] = True,
@@ -310,7 +318,7 @@ def sweep(
     file: Annotated[Path, typer.Argument(help="spec file")],
     campaign: Annotated[Path, typer.Option("--campaign", "-c", help="campaign file: what is drawn or gridded, "
                                            "how many samples, the seed (see docs/sweep.md)")],
-    out: Annotated[Path, typer.Option("--out", "-o", help="output folder; running the same command again resumes "
+    out: Annotated[Path, typer.Option("--out", "-o", parser=_path, metavar="PATH", help="output folder; running the same command again resumes "
                                       "the campaign in it")],
     serial: Annotated[bool, typer.Option("--serial", help="run the samples in a plain loop in this process "
                                          "instead of Ray (the throughput baseline)")] = False,
@@ -342,7 +350,7 @@ def sweep(
 @command("compile")
 def compile_(
     file: Annotated[Path, typer.Argument(help="spec file")],
-    out: Annotated[Optional[Path], typer.Option("--out", "-o", help=_out_help("compile"))] = None,
+    out: Annotated[Optional[Path], typer.Option("--out", "-o", parser=_path, metavar="PATH", help=_out_help("compile"))] = None,
     output: OldOutput = None,
     formulation: FormulationOption = None,
     no_build: Annotated[bool, typer.Option("--no-build", help="write the sources only")] = False,

@@ -85,6 +85,21 @@ def test_usage_errors_exit_2(args: tuple[str, ...], tmp_path: Path) -> None:
     assert not (tmp_path / "out").exists()
 
 
+@pytest.mark.parametrize("args", [
+    ("simulate", str(MINIMAL), "--out"), ("simulate", str(MINIMAL), "-o"), ("simulate", str(MINIMAL), "--video"),
+    ("compare", str(MINIMAL), "--out"), ("compile", str(MINIMAL), "--out"), ("schema", "--out"),
+    ("sweep", str(MINIMAL), "--campaign", "c.yaml", "--out"),
+])
+def test_an_empty_output_path_is_a_usage_error(args: tuple[str, ...], tmp_path: Path,
+                                               monkeypatch: pytest.MonkeyPatch) -> None:
+    """`-o "$OUT"` with OUT unset: not the current folder."""
+    monkeypatch.chdir(tmp_path)
+    result = runner.invoke(app, [*args, ""])
+    assert result.exit_code == 2, result.output
+    assert "an empty path" in result.output
+    assert not any(tmp_path.iterdir())
+
+
 @pytest.mark.parametrize("command", ("validate", "compile", "simulate", "compare", "bench"))
 def test_bad_specs_exit_1(command: str, tmp_path: Path) -> None:
     broken = tmp_path / "broken.yaml"
