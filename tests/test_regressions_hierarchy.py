@@ -287,6 +287,24 @@ def test_fallback_one_period_decays_all_states(robot):
     assert not bad, f"{robot}: {len(bad)}/1000 states grow in one period; (joint, |q̇|, |q̇ next|, clipped) {bad[:4]}"
 
 
+def test_a_joint_its_gravity_overloads_does_not_stop_the_others_braking():
+    """Joint 2 limited to 40 Nm against 77 Nm of gravity: its torque is clipped whatever the
+    fallback does, and the other joints are still braked (before: one shared damping factor, 0
+    because of joint 2, and no joint braked; joint 4 at 12 rad/s after 0.3 s)."""
+    text = spec_text("iiwa14", "  - {name: damping, type: joint, priority: 1, gains: {kp: 0, kd: 5}}",
+                     limits="  joint_torque: {max: [100, 40, 100, 100, 100, 100, 100]}", name="overloaded")
+    c = _controller(text)
+    q = np.array([0, 1.2, 0, -0.3, 0, 0.3, 0])  # leaning forward: joint 2 holds ~77 Nm
+    dq = np.array([0.5, 0.0, -0.5, 0.0, 0.8, 0.0, 1.0])
+    assert abs(pin.computeGeneralizedGravity(c.robot.model, c.robot.model.createData(), q)[1]) > 70  # (premise)
+    assert c.fallback_torque(q, dq)[1] == pytest.approx(-40.0)  # (clipped)
+    moving, start = [0, 2, 4, 6], dq.copy()
+    for _ in range(100):  # 0.1 s of fallback (semi-implicit Euler of the exact dynamics)
+        dq = dq + c.problem.period * _accel(c, q, dq, c.fallback_torque(q, dq))
+        q = q + c.problem.period * dq
+    assert np.all(np.abs(dq[moving]) < 0.9 * np.abs(start[moving])), dq  # (before: joint 3 at 1.09, joint 4 at 9.1)
+
+
 # -- 4. the relaxed solve brakes -------------------------------------------------------------------
 
 

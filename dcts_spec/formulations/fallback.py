@@ -10,7 +10,11 @@ D_j / M_jj is the decay rate `controller.fallback_damping` gives a joint of iner
 
 Clipping each joint's torque to its limit would break that decay (a light joint driven by the
 others' clipped coupling torques sped up); instead the damping part is scaled down by one factor
-α ∈ [0, 1], the largest that keeps every torque within its limit: a = α a_d, still a decay.
+α ∈ [0, 1], the largest that keeps every torque within its limit: a = α a_d, still a decay. A joint
+whose ν + g alone is beyond its limit on the side its braking pushes to (fast, or its torque limit
+lowered at run time below its gravity load) is clipped whatever α is and does not count: with it,
+α was 0 and no joint was braked (an iiwa14 with joint 2 limited to 40 Nm against 77 Nm of gravity:
+joint 4 reached 12 rad/s in 0.3 s of fallback).
 
 The caller (both runtimes) gives this function a velocity of 0 where the reading is non-finite,
 or beyond any the joint can reach (`plausible_velocity`: a sensor fault). ν grows like q̇², and
@@ -38,8 +42,8 @@ def plausible_velocity(v_max: np.ndarray) -> np.ndarray:
 
 
 def fallback_torque(problem: ControlProblem) -> ca.SX:
-    """The fallback torque as a function of q and q̇ (within the torque limits unless ν + g alone
-    is not; the caller clips it then)."""
+    """The fallback torque as a function of q and q̇ (within the torque limits, except on a joint
+    whose ν + g alone is not: the caller clips it)."""
     M = problem.mass_matrix
     damping = ca.DM(problem.vector("fallback_damping"))
     rate = ca.fmin(damping / ca.diag(M), STEP_DECAY / problem.period)
@@ -51,5 +55,5 @@ def fallback_torque(problem: ControlProblem) -> ca.SX:
         limit = problem.torque_limit[j]  # (a run-time torque limit, if there is one)
         room = ca.if_else(brake[j] > 0, limit - hold[j], -limit - hold[j])  # brake[j]·α may use this
         share = ca.if_else(ca.fabs(brake[j]) > 0, room / (brake[j] + (brake[j] == 0)), 1.0)
-        alpha = ca.fmin(alpha, ca.fmax(share, 0.0))
+        alpha = ca.fmin(alpha, ca.if_else(share >= 0, share, 1.0))  # (< 0: ν + g alone is beyond)
     return hold + alpha * brake
