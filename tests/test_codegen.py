@@ -781,14 +781,19 @@ int main(void)
 def test_two_bundles_in_one_cmake_project(built, tmp_path):
     """A cell with two controllers: another CMake project add_subdirectory()s two bundles and links
     both into one program (each with its own DAQP), which steps both as their own runtimes do; the
-    bundles' golden tests are left out of that project. With a bare-metal cross compiler (no
-    shared libraries), the same project builds for a Cortex-M7."""
+    bundles' golden tests are left out of that project. The project's own include folder has
+    headers named like DAQP's (utils.h, types.h): DAQP's come first. With a bare-metal cross
+    compiler (no shared libraries), the same project builds for a Cortex-M7."""
     cell = tmp_path / "cell"
     shutil.copytree(built[0], cell / "three_levels", ignore=shutil.ignore_patterns("build", "*.so", "*_test", "*_test_*"))
     compile_bundle(MINIMAL, cell / "minimal", build=False)
     (cell / "main.c").write_text(CELL_MAIN)
+    (cell / "inc").mkdir()
+    for header in ("utils.h", "types.h", "api.h"):
+        (cell / "inc" / header).write_text(f'#error "the cell\'s own {header}, not DAQP\'s"\n')
     (cell / "CMakeLists.txt").write_text(
-        "cmake_minimum_required(VERSION 3.13)\nproject(cell C)\nadd_subdirectory(three_levels)\nadd_subdirectory(minimal)\n"
+        "cmake_minimum_required(VERSION 3.13)\nproject(cell C)\ninclude_directories(inc)\n"
+        "add_subdirectory(three_levels)\nadd_subdirectory(minimal)\n"
         "add_executable(cell main.c)\ntarget_link_libraries(cell PRIVATE three_levels minimal)\n"
         "if(CMAKE_SYSTEM_NAME STREQUAL Generic)\n  target_link_options(cell PRIVATE --specs=nosys.specs)\nendif()\n")
     if shutil.which("cmake") is None:
@@ -799,9 +804,15 @@ def test_two_bundles_in_one_cmake_project(built, tmp_path):
         assert done.returncode == 0, " ".join(command) + "\n" + done.stdout + done.stderr
         return done.stdout
 
-    run("cmake", "-S", ".", "-B", "host")
+    run("cmake", "-S", ".", "-B", "host", "-DCMAKE_EXPORT_COMPILE_COMMANDS=ON")
     run("cmake", "--build", "host", "-j2")
     assert not list((cell / "host").rglob("*_test*")), "a bundle's tests were built in another project"
+    daqp_sources = {}  # bundle → the folders its DAQP was compiled from
+    for entry in json.loads((cell / "host" / "compile_commands.json").read_text()):
+        found = re.search(r"dcts_daqp_(\w+)\.dir", entry["command"])
+        if found:
+            daqp_sources.setdefault(found.group(1), set()).add(Path(entry["file"]).parent.parent.parent.name)
+    assert sorted(map(sorted, daqp_sources.values())) == [["minimal"], ["three_levels"]], daqp_sources  # (its own, each)
     torques = np.array([line.split() for line in run(str(cell / "host" / "cell")).splitlines()], dtype=float)
     q = np.array([0.1, 0.5, -0.2, -1.0, 0.3, 1.0, 0.2])
     dq = np.array([0.2, -0.1, 0.3, 0.1, -0.2, 0.4, 0.1])
