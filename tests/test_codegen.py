@@ -694,6 +694,22 @@ def _compiles(output: str) -> list[str]:
     return sorted(re.findall(r"-c (\S+\.c)", output))
 
 
+@pytest.mark.skipif(shutil.which("cc") is None, reason="no C compiler (cc)")
+def test_fast_math_is_refused(built):
+    """-ffast-math would drop the step's checks of non-finite values: the C refuses it, and says why."""
+    out, compiled = built
+    name = compiled.manifest["name"]
+
+    def syntax(*flags: str) -> subprocess.CompletedProcess:
+        return subprocess.run(["cc", "-fsyntax-only", *flags, "-Idaqp/include", f"{name}.c"], cwd=out,
+                              capture_output=True, text=True, timeout=120)
+
+    assert syntax("-O2").returncode == 0
+    for flag in ("-ffast-math", "-Ofast", "-ffinite-math-only"):
+        done = syntax(flag)
+        assert done.returncode != 0 and "without -ffast-math" in done.stderr, (flag, done.stderr)
+
+
 def test_no_rebuild_after_compile(built):
     """Right after `dcts compile`, make finds everything up to date (nothing rewritten after the build)."""
     out, _ = built
