@@ -32,7 +32,7 @@ FORMULATIONS: tuple[str, ...] = get_args(Formulation)
 
 EPILOG = ("Outputs: every command that writes a folder takes -o/--out DIR; without it, compile writes "
           "build/<name>, simulate runs/<name> and compare runs/<name>-compare (<name>: the spec's `name`). "
-          "dcts writes only into a folder that is empty or that it wrote, and replaces only its own files. "
+          "dcts writes only into a folder that is empty or that the same command wrote, and replaces only its own files. "
           "Exit codes: 0 ok, 1 a bad spec or input (the message says where), 2 a usage error (unknown option, "
           "bad option value), 3 an internal error (a bug: DCTS_DEBUG=1 shows the traceback).")
 INTERNAL_ERROR = 3

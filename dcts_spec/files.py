@@ -8,6 +8,11 @@ main.c) stays. A folder that exists, is not empty and has no OWNED file was not 
 files inside its subfolders, so `install` also refuses (and leaves the folder as it was) where
 the new output would replace a user's file: one with the name of a new entry (a summary.json
 of their own in a bundle folder), or one added inside a folder dcts wrote (firmware/my_main.c).
+
+A folder holds one kind of output (OWNED records which): a command refuses a folder that holds
+another kind, as a newer output of its own would replace it (`dcts simulate -o` into a campaign's
+folder deleted the campaign). A campaign adds to its folder over several runs: it replaces its
+report with `install_files`, which keeps its samples and whatever else is there.
 """
 
 from __future__ import annotations
@@ -19,7 +24,12 @@ import time
 from fnmatch import fnmatch
 from pathlib import Path
 
-OWNED = ".dcts-owned"  # JSON: {"entries": top-level names, "paths": every path below them} dcts wrote
+OWNED = ".dcts-owned"  # JSON: {"kind", "entries": top-level names, "paths": every path below them} dcts wrote
+# The kinds of output, by the command that writes them
+KINDS = {"bundle": "dcts compile", "run": "dcts simulate", "comparison": "dcts compare", "campaign": "dcts sweep"}
+# An output from before OWNED recorded its kind, known by a file only that kind writes (in this order)
+_KIND_MARKERS = (("campaign.json", "campaign"), ("manifest.json", "bundle"), ("comparison.json", "comparison"),
+                 ("summary.json", "run"))
 # A staging folder this old was left by a run that was killed (SIGKILL, a power cut): a live run
 # finishes its staging in minutes, and a younger one may belong to a run still going.
 STALE_STAGING_SECONDS = 3600.0
@@ -56,6 +66,21 @@ def owned_names(folder: Path) -> set[str]:
     return _names(_owned(folder))
 
 
+def output_kind(folder: Path) -> str | None:
+    """The kind of dcts output `folder` holds (a KINDS key), None if it shows none."""
+    owned = _owned(folder)
+    if isinstance(owned, dict) and owned.get("kind"):
+        return str(owned["kind"])
+    return next((kind for marker, kind in _KIND_MARKERS if (folder / marker).is_file()), None)
+
+
+def _check_kind(folder: Path, kind: str) -> None:
+    held = output_kind(folder) if folder.is_dir() else None
+    if held is not None and held != kind:
+        raise OutputFolderError(f"{folder} holds the output of `{KINDS.get(held, held)}`, not of `{KINDS[kind]}`: "
+                                "refusing to replace it; choose another output folder")
+
+
 def _paths(root: Path) -> list[str]:
     """The paths of every file and folder below `root`, relative to it."""
     return sorted(p.relative_to(root).as_posix() for p in root.rglob("*"))
@@ -81,15 +106,17 @@ def _users_files(folder: Path, owned: dict | list | None, names: set[str], regen
     return [p for p in candidates if not any(fnmatch(p, pattern) for pattern in regenerated)]
 
 
-def check_writable(folder: Path, allow_unmarked=lambda folder: False) -> None:
-    """Raise OutputFolderError unless `folder` is absent, empty, or written by dcts before
-    (`allow_unmarked`: other evidence of that, e.g. a bundle's manifest from before OWNED)."""
+def check_writable(folder: Path, kind: str, allow_unmarked=lambda folder: False) -> None:
+    """Raise OutputFolderError unless `folder` is absent, empty, or holds an output of this `kind`
+    (a KINDS key) dcts wrote before (`allow_unmarked`: other evidence of that, e.g. a bundle's
+    manifest from before OWNED)."""
     folder = Path(folder)
     if folder.exists() and not folder.is_dir():
         raise OutputFolderError(f"{folder} exists and is not a directory")
     if folder.is_dir() and any(folder.iterdir()) and not (folder / OWNED).is_file() and not allow_unmarked(folder):
         raise OutputFolderError(f"{folder} is not empty and was not written by dcts (it has no {OWNED}): refusing "
                                 "to write into it; choose another output folder (dcts never deletes files it did not write)")
+    _check_kind(folder, kind)
 
 
 def request_stop(signum: int) -> None:
@@ -105,20 +132,22 @@ def stop_signal() -> int | None:
     return _stop_signal
 
 
-def install(staging: Path, folder: Path, regenerated: tuple[str, ...] = ()) -> None:
-    """Move the finished `staging` folder's entries into `folder` (see the module docstring);
-    after `request_stop`, raise SystemExit instead (the caller removes its staging folder).
-    `regenerated`: patterns (fnmatch, relative paths) of what the output's own tools make and
-    remake, which it may replace though dcts did not write them (a bundle's `make` products)."""
+def install(staging: Path, folder: Path, kind: str, regenerated: tuple[str, ...] = ()) -> None:
+    """Move the finished `staging` folder's entries, an output of `kind`, into `folder` (see the
+    module docstring); after `request_stop`, raise SystemExit instead (the caller removes its
+    staging folder). `regenerated`: patterns (fnmatch, relative paths) of what the output's own
+    tools make and remake, which it may replace though dcts did not write them (a bundle's `make`
+    products)."""
     if _stop_signal is not None:
         raise SystemExit(128 + _stop_signal)
     staging, folder = Path(staging), Path(folder)
     new = sorted(p.name for p in staging.iterdir() if p.name != OWNED)
     paths = [p for p in _paths(staging) if p != OWNED]
-    (staging / OWNED).write_text(json.dumps({"entries": new, "paths": paths}) + "\n")
+    (staging / OWNED).write_text(json.dumps({"kind": kind, "entries": new, "paths": paths}) + "\n")
     if not folder.exists():
         staging.rename(folder)
         return
+    _check_kind(folder, kind)  # (again: the folder may have changed while the output was made)
     owned = _owned(folder)
     old = _names(owned)
     users = _users_files(folder, owned, old | set(new), regenerated)
@@ -144,6 +173,45 @@ def install(staging: Path, folder: Path, regenerated: tuple[str, ...] = ()) -> N
     finally:
         shutil.rmtree(trash, ignore_errors=True)
     staging.rmdir()
+
+
+def install_files(staging: Path, folder: Path, previous: set[str]) -> None:
+    """Move the files below `staging` into `folder`, an output dcts is adding to (a campaign's
+    report next to its samples): the files dcts wrote there before (OWNED's paths, and `previous`
+    for an OWNED file from before they were listed) that the new set lacks go, every other file
+    stays. A user's file where a new one goes refuses, and nothing changes. While the files move,
+    OWNED lists the old and the new ones, so an interruption leaves none of them unlisted."""
+    if _stop_signal is not None:
+        raise SystemExit(128 + _stop_signal)
+    staging, folder = Path(staging), Path(folder)
+    owned = _owned(folder)
+    state = owned if isinstance(owned, dict) else {"entries": sorted(_names(owned))}
+    old = set(state.get("paths", [])) | previous
+    new = [p for p in _paths(staging) if (staging / p).is_file()]
+    users = [p for p in new if (folder / p).exists() and p not in old]
+    if users:
+        shown = ", ".join(users[:5]) + (f" and {len(users) - 5} more" if len(users) > 5 else "")
+        raise OutputFolderError(f"{folder} has files dcts did not write where this output goes ({shown}): nothing "
+                                "was changed; move them (dcts never deletes or overwrites files it did not write)")
+    folders = {p for f in new for p in _parents(f)}
+    (folder / OWNED).write_text(json.dumps({**state, "paths": sorted(old | set(new) | folders)}) + "\n")
+    for path in new:
+        (folder / path).parent.mkdir(parents=True, exist_ok=True)
+        (staging / path).replace(folder / path)
+    for path in sorted(old - set(new), reverse=True):  # (files before their folders)
+        target = folder / path
+        if target.is_file() or target.is_symlink():
+            target.unlink()
+        elif target.is_dir() and path not in folders and not any(target.iterdir()):
+            target.rmdir()
+    kept = {p for p in old - set(new) if (folder / p).exists()}  # (an owned folder a user's file keeps)
+    (folder / OWNED).write_text(json.dumps({**state, "paths": sorted(set(new) | folders | kept)}) + "\n")
+
+
+def _parents(path: str) -> list[str]:
+    """The folders of a relative path, outermost first: 'a/b/c.png' → ['a', 'a/b']."""
+    parts = path.split("/")[:-1]
+    return ["/".join(parts[: i + 1]) for i in range(len(parts))]
 
 
 def remove_stale_staging(parent: Path, prefix: str, suffix: str = "") -> None:

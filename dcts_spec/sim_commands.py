@@ -71,7 +71,7 @@ def _guarded(command: Callable[[], None]) -> int:
 def _simulate(file: Path, out: Path | None, options: RunOptions, formulation: str | None,
               plots: bool, viewer: bool, video: Path | None) -> None:
     spec = _load(file, options, [formulation] if formulation else [])
-    out = _output_directory(out, RESULTS_DIR / spec.name)
+    out = _output_directory(out, RESULTS_DIR / spec.name, "run")
     with ExitStack() as stack:
         sim = _prepare(spec, options, formulation, stack)
         hooks = []
@@ -93,7 +93,7 @@ def _simulate(file: Path, out: Path | None, options: RunOptions, formulation: st
         if recorder:
             recorder.close()
         phase(f"writing the log, summary{' and plots' if plots else ''}")
-        with atomic_directory(out) as staging:
+        with atomic_directory(out, "run") as staging:
             write_run(run, staging, plots=plots)
     if not options.quiet:
         typer.echo(describe(run))
@@ -106,7 +106,7 @@ def _compare(file: Path, out: Path | None, options: RunOptions, formulations: li
     if not formulations:
         raise CommandError("--formulations needs at least one formulation")
     spec = _load(file, options, formulations)
-    out = _output_directory(out, RESULTS_DIR / f"{spec.name}-compare")
+    out = _output_directory(out, RESULTS_DIR / f"{spec.name}-compare", "comparison")
     runs = []
     with ExitStack() as stack:
         for formulation in formulations:
@@ -115,7 +115,7 @@ def _compare(file: Path, out: Path | None, options: RunOptions, formulations: li
             if not options.quiet:
                 typer.echo(describe(runs[-1]))
     phase(f"writing the comparison{' and overlay plots' if plots else ''}")
-    with atomic_directory(out) as staging:
+    with atomic_directory(out, "comparison") as staging:
         write_comparison(runs, staging, f"{spec.name}: {', '.join(formulations)} ({options.runtime} runtime)",
                          plots=plots)
     if not options.quiet:
@@ -136,11 +136,12 @@ def _load(file: Path, options: RunOptions, formulations: list[str]) -> Spec:
     return load_spec(file)
 
 
-def _output_directory(out: Path | None, default: Path) -> Path:
-    """The output directory, checked before a run rather than after it."""
+def _output_directory(out: Path | None, default: Path, kind: str) -> Path:
+    """The output directory of an output of `kind` (files.KINDS), checked before a run rather than
+    after it."""
     out = out or default
     try:
-        check_writable(out, allow_unmarked=earlier_output)
+        check_writable(out, kind, allow_unmarked=earlier_output)
     except OutputFolderError as error:
         raise CommandError(f"--out {error}") from None
     return out

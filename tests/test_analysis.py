@@ -170,31 +170,31 @@ def test_json_ready_and_tables(case) -> None:
 
 def test_atomic_directory_replaces_its_own_files_and_keeps_the_users(tmp_path: Path) -> None:
     out = tmp_path / "out"
-    with atomic_directory(out) as staging:
+    with atomic_directory(out, "run") as staging:
         (staging / "a.txt").write_text("first")
         assert not out.exists()
     assert (out / "a.txt").read_text() == "first"
     with pytest.raises(RuntimeError):
-        with atomic_directory(out) as staging:
+        with atomic_directory(out, "run") as staging:
             (staging / "a.txt").write_text("second")
             raise RuntimeError("boom")
     assert (out / "a.txt").read_text() == "first"
     (out / "notes.txt").write_text("mine")  # the user's
     (out / "mine").mkdir()
-    with atomic_directory(out) as staging:
+    with atomic_directory(out, "run") as staging:
         (staging / "b.txt").write_text("third")
     assert sorted(p.name for p in out.iterdir()) == [OWNED, "b.txt", "mine", "notes.txt"]  # a.txt was dcts'
     assert (out / "notes.txt").read_text() == "mine"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]
     (tmp_path / "file").write_text("")
     with pytest.raises(OutputFolderError):
-        with atomic_directory(tmp_path / "file"):
+        with atomic_directory(tmp_path / "file", "run"):
             pass
     users = tmp_path / "users"
     users.mkdir()
     (users / "important.txt").write_text("keep")
     with pytest.raises(OutputFolderError, match="not written by dcts"):
-        with atomic_directory(users):
+        with atomic_directory(users, "run"):
             pass
     assert [p.name for p in users.iterdir()] == ["important.txt"]
 
@@ -204,28 +204,28 @@ def test_atomic_directory_never_overwrites_a_users_file_where_its_output_goes(tm
     and the folder is left as it was (both were overwritten or deleted: another command's
     summary.json, a main.c added to a bundle's firmware/)."""
     out = tmp_path / "out"
-    with atomic_directory(out) as staging:
+    with atomic_directory(out, "run") as staging:
         (staging / "firmware").mkdir()
         (staging / "firmware" / "startup.c").write_text("dcts")
     (out / "firmware" / "my_main.c").write_text("mine")
     with pytest.raises(OutputFolderError, match="firmware/my_main.c"):
-        with atomic_directory(out) as staging:
+        with atomic_directory(out, "run") as staging:
             (staging / "firmware").mkdir()
     assert (out / "firmware" / "my_main.c").read_text() == "mine" and (out / "firmware" / "startup.c").is_file()
     (out / "firmware" / "my_main.c").unlink()
     (out / "summary.json").write_text("mine")
     with pytest.raises(OutputFolderError, match="summary.json"):
-        with atomic_directory(out) as staging:
+        with atomic_directory(out, "run") as staging:
             (staging / "summary.json").write_text("dcts")
     assert (out / "summary.json").read_text() == "mine" and (out / "firmware" / "startup.c").is_file()
-    with atomic_directory(out) as staging:  # its own files (all of firmware/) it replaces
+    with atomic_directory(out, "run") as staging:  # its own files (all of firmware/) it replaces
         (staging / "log.npz").write_text("dcts")
     assert sorted(p.name for p in out.iterdir()) == [OWNED, "log.npz", "summary.json"]
     (out / OWNED).write_text('["log.npz"]')  # an OWNED file from before the paths were listed
     (out / "log.npz").unlink()
     (out / "log.npz").mkdir()
     (out / "log.npz" / "inside").write_text("")
-    with atomic_directory(out) as staging:  # (its folders count as dcts's, as they did)
+    with atomic_directory(out, "run") as staging:  # (its folders count as dcts's, as they did)
         (staging / "log.npz").write_text("dcts")
     assert (out / "log.npz").read_text() == "dcts"
 
@@ -246,7 +246,7 @@ def test_a_run_folder_from_before_the_owned_list_is_still_written(tmp_path: Path
     out.mkdir()
     (out / "summary.json").write_text("{}")
     (out / "mine.txt").write_text("keep")
-    with atomic_directory(out) as staging:
+    with atomic_directory(out, "run") as staging:
         (staging / "summary.json").write_text('{"new": 1}')
     assert (out / "summary.json").read_text() == '{"new": 1}' and (out / "mine.txt").read_text() == "keep"
 

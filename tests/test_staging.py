@@ -42,12 +42,12 @@ def test_after_a_stop_request_nothing_is_installed_and_the_command_exits_with_th
     staging.mkdir()
     (staging / "file").write_text("x")
     monkeypatch.setattr(files, "_stop_signal", None)
-    install(staging, out)
+    install(staging, out, "run")
     assert (out / "file").is_file()
     staging.mkdir()
     monkeypatch.setattr(files, "_stop_signal", signal.SIGTERM)
     with pytest.raises(SystemExit) as stopped:
-        install(staging, tmp_path / "other")
+        install(staging, tmp_path / "other", "run")
     assert stopped.value.code == 128 + signal.SIGTERM and not (tmp_path / "other").exists()
     monkeypatch.setattr(cli, "app", lambda: None)  # a command that finished as if never signalled
     with pytest.raises(SystemExit) as exited:

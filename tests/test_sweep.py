@@ -340,6 +340,28 @@ def test_a_folder_dcts_did_not_write_is_refused(spec_file, campaign_file, tmp_pa
     assert sorted(p.name for p in tmp_path.iterdir()) == ["notes.txt"]
 
 
+def test_a_campaigns_folder_keeps_its_samples_and_the_users_files(spec_file, campaign_file, tmp_path) -> None:
+    """Another command's output never replaces a campaign (`dcts simulate -o` into one deleted it),
+    and a campaign's report replaces only the report files dcts wrote (a rerun deleted the user's
+    files in plots/ and replays/)."""
+    out = tmp_path / "out"
+    options = SweepOptions(engine="serial", progress=False, max_samples=2)
+    sweep(spec_file, campaign_file, out, options)
+    (out / "plots" / "notes.txt").write_text("mine")
+    (out / "replays" / "sample_mine.yaml").write_text("mine")
+    for command in (("simulate", "--no-plots"), ("compare", "--no-plots"), ("compile", "--no-build")):
+        result = invoke(command[0], str(spec_file), *command[1:], "-o", str(out), "-q")
+        assert result.exit_code == 1 and "holds the output of `dcts sweep`" in result.stderr, result.output
+    assert len(_rows(out)) == 2
+    old_plots = {p.name for p in (out / "plots").glob("*.png")}
+    resumed = sweep(spec_file, campaign_file, out, options)
+    assert len(_rows(out)) == 4 and (out / "report.json").is_file() and old_plots
+    assert (out / "plots" / "notes.txt").read_text() == "mine"
+    assert (out / "replays" / "sample_mine.yaml").read_text() == "mine"
+    assert {p.name for p in (out / "replays").glob("sample_0*.yaml")} == {
+        Path(w["replay"]).name for w in resumed.report["worst_cases"]}  # (the earlier worst cases' replaced)
+
+
 def test_a_worst_case_replays_with_dcts_simulate(spec_file, campaign_file, serial_run) -> None:
     worst = serial_run.report["worst_cases"][0]
     assert worst["metric"] == "primary_rms_error"
@@ -382,6 +404,35 @@ def test_optimize_tunes_the_gain_and_resumes(ray_session, spec_file, tmp_path) -
     assert "Best of 4 trials" in (out / "report.html").read_text()
     best = second.report["optimize"]["best"]  # the rows are the best trial's, whichever run found it
     assert max(r["primary_rms_error"] for r in _rows(out).values()) == pytest.approx(best["value"], rel=1e-12)
+
+
+def test_an_interrupted_optimization_resumes_with_new_values(spec_file, tmp_path) -> None:
+    """The trial an interrupted run was in is closed, and the resumed study draws new values (its
+    sampler, seeded as at the start, proposed the first trials' values again)."""
+    import optuna
+    from optuna.storages import JournalStorage
+    from optuna.storages.journal import JournalFileBackend
+
+    campaign_file = tmp_path / "campaign.yaml"
+    campaign_file.write_text(CAMPAIGN.replace("samples: 6", "samples: 1"))
+    out, options = tmp_path / "out", SweepOptions(engine="serial", progress=False, plots=False)
+    tune(spec_file, campaign_file, out, "primary_rms_error", "worst", trials=2, options=options)
+    storage = JournalStorage(JournalFileBackend(str(out / "optuna.journal")))
+    optuna.load_study(study_name="dcts-sweep", storage=storage).ask()  # (the trial a kill left running)
+    record = tune(spec_file, campaign_file, out, "primary_rms_error", "worst", trials=4, options=options).report["optimize"]
+    assert record["trials"] == 4
+    assert len({t["values"]["tool_position.kp"] for t in record["history"]}) == 4, record["history"]
+    states = [t.state for t in optuna.load_study(study_name="dcts-sweep", storage=storage).trials]
+    assert optuna.trial.TrialState.RUNNING not in states
+
+
+def test_an_optimization_refused_leaves_no_folder(spec_file, tmp_path) -> None:
+    campaign_file = tmp_path / "campaign.yaml"
+    campaign_file.write_text(CAMPAIGN.split("controller:")[0] + "report:" + CAMPAIGN.split("report:")[1])
+    result = invoke("sweep", str(spec_file), "--campaign", str(campaign_file), "-o", str(tmp_path / "o"), "--serial",
+                    "--optimize", "primary_rms_error")
+    assert result.exit_code == 1 and "needs controller values to tune" in result.stderr, result.output
+    assert not (tmp_path / "o").exists()
 
 
 def test_sweep_help_and_an_unknown_optimize_metric(spec_file, campaign_file, tmp_path) -> None:

@@ -19,12 +19,13 @@ def earlier_output(folder: Path) -> bool:
 
 
 @contextmanager
-def atomic_directory(path: Path) -> Iterator[Path]:
-    """Yield an empty staging folder whose entries go into `path` when the block succeeds
-    (`files.install`: a user's own files in `path` stay). On an exception nothing is left behind
-    and `path` is untouched. Raises OutputFolderError at once if `path` was not written by dcts."""
+def atomic_directory(path: Path, kind: str) -> Iterator[Path]:
+    """Yield an empty staging folder whose entries, an output of `kind` (files.KINDS), go into
+    `path` when the block succeeds (`files.install`: a user's own files in `path` stay). On an
+    exception nothing is left behind and `path` is untouched. Raises OutputFolderError at once if
+    `path` was not written by dcts, or holds another kind of output."""
     path = Path(path)
-    check_writable(path, allow_unmarked=earlier_output)
+    check_writable(path, kind, allow_unmarked=earlier_output)
     path.parent.mkdir(parents=True, exist_ok=True)
     remove_stale_staging(path.parent, f".{path.name}.", ".partial")
     # mkdir, not mkdtemp: the folder gets the user's usual permissions.
@@ -32,7 +33,7 @@ def atomic_directory(path: Path) -> Iterator[Path]:
     staging.mkdir()
     try:
         yield staging
-        install(staging, path)
+        install(staging, path, kind)
     finally:
         if staging.exists():
             shutil.rmtree(staging, ignore_errors=True)

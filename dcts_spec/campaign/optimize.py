@@ -60,10 +60,16 @@ def optimize(session: CampaignSession, metric: str, objective: str, trials: int)
     folder = session.folder.folder
     storage = JournalStorage(JournalFileBackend(str(folder / JOURNAL)))
     direction = "maximize" if metric in LOWER_IS_WORSE else "minimize"
-    study = optuna.create_study(study_name="dcts-sweep", storage=storage, load_if_exists=True, direction=direction,
-                                sampler=optuna.samplers.TPESampler(seed=session.campaign.seed))
+    study = optuna.create_study(study_name="dcts-sweep", storage=storage, load_if_exists=True, direction=direction)
+    state = optuna.trial.TrialState
+    for trial in study.trials:  # (one an interrupted run was in: it never finishes)
+        if trial.state == state.RUNNING:
+            study.tell(trial.number, state=state.FAIL)
+    # A resumed study's sampler continues from its trials: seeded as at the start, TPE proposed the
+    # first trials' values again (its first trials are random draws from the seed).
+    study.sampler = optuna.samplers.TPESampler(seed=session.campaign.seed + len(study.trials))
     indices = list(range(session.driver.sampler.count))
-    finished = sum(t.state == optuna.trial.TrialState.COMPLETE for t in study.trials)
+    finished = sum(t.state == state.COMPLETE for t in study.trials)
     for _ in range(max(0, trials - finished)):
         trial = study.ask()
         values = {name: _suggest(trial, name, d) for name, d in space.items()}
@@ -72,10 +78,10 @@ def optimize(session: CampaignSession, metric: str, objective: str, trials: int)
         study.tell(trial, score)
         _append(folder / TRIALS, {"trial": trial.number, "values": values, objective: score})
     best = study.best_trial
-    return {"metric": metric, "objective": objective, "direction": direction, "trials": len(study.trials),
-            "best": {"trial": best.number, "values": best.params, "value": best.value},
-            "history": [{"trial": t.number, "values": t.params, "value": t.value} for t in study.trials
-                        if t.state == optuna.trial.TrialState.COMPLETE]}
+    history = [{"trial": t.number, "values": t.params, "value": t.value} for t in study.trials
+               if t.state == state.COMPLETE]
+    return {"metric": metric, "objective": objective, "direction": direction, "trials": len(history),
+            "best": {"trial": best.number, "values": best.params, "value": best.value}, "history": history}
 
 
 def _suggest(trial: Any, name: str, d: Distribution | list[str]) -> Any:
@@ -115,7 +121,7 @@ def tune(spec_file: str | Path, campaign_file: str | Path, out: str | Path, metr
     """Optimize the campaign's controller values for `metric` (see the module docstring), then
     run the campaign's samples with the best ones and write the report."""
     settings = {"mode": "optimize", "metric": metric, "objective": objective}
-    with campaign_session(spec_file, campaign_file, out, settings, options) as session:
+    with campaign_session(spec_file, campaign_file, out, settings, options, check=search_space) as session:
         record = optimize(session, metric, objective, trials)
         best = record["best"]["values"]
         if any(not _ran_with(row, best) for row in session.rows.values()):

@@ -4,19 +4,22 @@ makes resuming safe.
 campaign.json records the SHA-256 of the spec and campaign files (and the optimization's
 settings); running the same command again skips the samples already in samples.jsonl, and a
 changed file is refused at its line. The folder follows dcts' output rules (`files.py`): it is
-written only if absent, empty, or written by dcts (its OWNED file lists what dcts wrote there).
+written only if absent, empty, or a campaign's folder (its OWNED file lists what dcts wrote
+there); a report replaces only the report files dcts wrote, and only once it is complete.
 """
 
 from __future__ import annotations
 
 import hashlib
 import json
+import secrets
 import shutil
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
-from ..files import OWNED, OutputFolderError, check_writable, owned_names
+from ..files import OWNED, OutputFolderError, check_writable, install_files, owned_names, remove_stale_staging
 from ..spec.errors import Diagnostic, SpecError
 
 STATE = "campaign.json"
@@ -48,7 +51,7 @@ class ResultsFolder:
     def check(self) -> None:
         """Raise if the campaign cannot go into the folder (a folder dcts did not write, another
         output, another campaign): writes nothing, so that the inputs' own checks come first."""
-        check_writable(self.folder)
+        check_writable(self.folder, "campaign")
         state_file = self.folder / STATE
         if state_file.is_file():
             self._check_same(json.loads(state_file.read_text()))
@@ -62,7 +65,10 @@ class ResultsFolder:
         self.check()
         state_file = self.folder / STATE
         self.folder.mkdir(parents=True, exist_ok=True)
-        (self.folder / OWNED).write_text(json.dumps(sorted(NAMES)) + "\n")
+        owned = self.folder / OWNED
+        recorded = json.loads(owned.read_text()) if owned.is_file() else {}
+        paths = recorded.get("paths", []) if isinstance(recorded, dict) else []  # (the report's files)
+        owned.write_text(json.dumps({"kind": "campaign", "entries": sorted(NAMES), "paths": paths}) + "\n")
         state_file.write_text(json.dumps(self.state, indent=2) + "\n")
         return self._finished()
 
@@ -104,14 +110,26 @@ class ResultsFolder:
                 f.write(json.dumps(row) + "\n")
                 f.flush()
 
-    def clear_report(self) -> None:
-        """Remove the previous report (dcts wrote it: named in OWNED) before writing the new one;
-        in replays/, only the specs (a replay run's output folder there stays)."""
-        for name in REPORT_NAMES:
-            path = self.folder / name
-            if path.is_dir():
-                shutil.rmtree(path)
-            elif path.exists():
-                path.unlink()
-        for spec in (self.folder / REPLAYS).glob("sample_*.yaml"):
-            spec.unlink()
+    @contextmanager
+    def report_staging(self) -> Iterator[Path]:
+        """Yield an empty folder to write the report into; when the block succeeds, its files
+        replace the report files dcts wrote before (`files.install_files`): the old report stays
+        until the new one is complete, and a user's file in plots/ or replays/ (a replay's run
+        folder, their notes) stays."""
+        parent = self.folder.parent
+        remove_stale_staging(parent, f".{self.folder.name}.", ".report")
+        staging = parent / f".{self.folder.name}.{secrets.token_hex(6)}.report"
+        staging.mkdir()
+        try:
+            yield staging
+            install_files(staging, self.folder, self._earlier_report())
+        finally:
+            shutil.rmtree(staging, ignore_errors=True)
+
+    def _earlier_report(self) -> set[str]:
+        """The report files of a campaign folder whose OWNED file predates the list of paths."""
+        if "paths" in (json.loads((self.folder / OWNED).read_text()) or {}):
+            return set()
+        plots = self.folder / "plots"
+        return {"report.json", "report.html", *(f"plots/{p.name}" for p in plots.glob("*.png")),
+                *(f"{REPLAYS}/{p.name}" for p in (self.folder / REPLAYS).glob("sample_*.yaml"))}

@@ -4,7 +4,7 @@ samples not yet in the folder on the engine, write the report."""
 from __future__ import annotations
 
 import shlex
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass
 from pathlib import Path
@@ -71,7 +71,7 @@ class CampaignSession:
     """A campaign's checked inputs, its folder and its pool, for a sweep or an optimization."""
 
     def __init__(self, spec_file: Path, campaign_file: Path, out: Path, settings: dict[str, Any],
-                 options: SweepOptions):
+                 options: SweepOptions, check: Callable[[CampaignSession], Any] | None = None):
         self.options = options
         self.spec_file, self.campaign_file = spec_file, campaign_file
         self.campaign: Campaign = load_campaign(campaign_file)  # its errors before the spec's
@@ -91,6 +91,8 @@ class CampaignSession:
         for formulation, mass_scale in self._bundles():
             self.driver.bundle(formulation, mass_scale)
         check_parameters(self.driver)
+        if check is not None:  # (the caller's own check of the inputs: an optimization's search space)
+            check(self)
         self.rows = self.folder.open()  # (only now: a campaign refused above leaves no folder)
         self.pool: Pool | None = None
         self.parameters: dict[str, Any] | None = None  # the optimizer's best, for the campaign's rows
@@ -147,38 +149,38 @@ class CampaignSession:
     def report(self, extra: dict[str, Any]) -> dict[str, Any]:
         rows = [self.rows[i] for i in sorted(self.rows)]
         settings = self.campaign.report
-        folder = self.folder.folder
-        self.folder.clear_report()
-        (folder / REPLAYS).mkdir(exist_ok=True)
-        worst = []
-        for metric in settings.metrics:
-            for row in worst_cases(rows, metric, settings.worst):
-                worst.append(self._replay(metric, row))
-        plots = write_plots(rows, self.driver.sampler.swept(), list(settings.metrics), folder) if self.options.plots \
-            else []
-        throughput = self.pool.throughput if self.pool else Throughput(self.options.engine, 0)
-        report = {
-            "title": f"{self.driver.spec.name}: campaign {self.campaign_file.name}",
-            "spec": str(self.spec_file), "campaign": str(self.campaign_file),
-            "samples": self.driver.sampler.count, "finished": len(rows),
-            "rates": rates(rows, settings),
-            "metrics": summarize_metrics(rows, list(settings.metrics)),
-            "worst_cases": worst, "plots": plots, "throughput": throughput.to_dict(), **extra,
-        }
-        save_json(report, folder / "report.json")
-        write_html(report, plots, folder / "report.html")
+        with self.folder.report_staging() as staging:
+            (staging / REPLAYS).mkdir()
+            worst = []
+            for metric in settings.metrics:
+                for row in worst_cases(rows, metric, settings.worst):
+                    worst.append(self._replay(metric, row, staging))
+            plots = write_plots(rows, self.driver.sampler.swept(), list(settings.metrics), staging) \
+                if self.options.plots else []
+            throughput = self.pool.throughput if self.pool else Throughput(self.options.engine, 0)
+            report = {
+                "title": f"{self.driver.spec.name}: campaign {self.campaign_file.name}",
+                "spec": str(self.spec_file), "campaign": str(self.campaign_file),
+                "samples": self.driver.sampler.count, "finished": len(rows),
+                "rates": rates(rows, settings),
+                "metrics": summarize_metrics(rows, list(settings.metrics)),
+                "worst_cases": worst, "plots": plots, "throughput": throughput.to_dict(), **extra,
+            }
+            save_json(report, staging / "report.json")
+            write_html(report, plots, staging / "report.html")
         return report
 
-    def _replay(self, metric: str, row: dict[str, Any]) -> dict[str, Any]:
-        """The worst case's spec, written for `dcts simulate` (the sample's own data)."""
+    def _replay(self, metric: str, row: dict[str, Any], staging: Path) -> dict[str, Any]:
+        """The worst case's spec, written for `dcts simulate` (the sample's own data) into the
+        report's `staging` folder, for its place in the campaign's folder."""
         index = row["index"]
         name = replay_name(index)
         path = self.folder.folder / name
         data = self.driver.spec_data(self.driver.sample(index, self.parameters))
         comment = (f"Sample {index} (seed {row['seed']}) of the campaign {self.campaign_file} on {self.spec_file}: "
                    f"replay with\n  dcts simulate {path}")
-        if not path.exists():  # (a sample worst by several metrics)
-            path.write_text(replay_yaml(data, self.spec_file, path, comment), encoding="utf-8")
+        if not (staging / name).exists():  # (a sample worst by several metrics)
+            (staging / name).write_text(replay_yaml(data, self.spec_file, path, comment), encoding="utf-8")
         command = f"dcts simulate {shlex.quote(str(path))} -o {shlex.quote(str(path.with_suffix('')))}"
         return {"metric": metric, "value": row[metric], "index": index, "seed": row["seed"], "replay": name,
                 "command": command}
@@ -191,8 +193,9 @@ class CampaignSession:
 
 @contextmanager
 def campaign_session(spec_file: str | Path, campaign_file: str | Path, out: str | Path, settings: dict[str, Any],
-                     options: SweepOptions) -> Iterator[CampaignSession]:
-    session = CampaignSession(Path(spec_file), Path(campaign_file), Path(out), settings, options)
+                     options: SweepOptions, check: Callable[[CampaignSession], Any] | None = None
+                     ) -> Iterator[CampaignSession]:
+    session = CampaignSession(Path(spec_file), Path(campaign_file), Path(out), settings, options, check)
     try:
         yield session
     finally:

@@ -101,7 +101,7 @@ def _is_bundle(directory: Path) -> bool:
 
 def _check_output(out_dir: Path) -> None:
     try:  # (a bundle from before the OWNED file is known by its manifest)
-        check_writable(out_dir, allow_unmarked=_is_bundle)
+        check_writable(out_dir, "bundle", allow_unmarked=_is_bundle)
     except OutputFolderError as error:
         raise CodegenError(str(error)) from None
 
@@ -476,7 +476,7 @@ def compile_bundle(
         if target == "cortex-m7":
             report.firmware = manifest["cortex_m7"] = build_firmware(tmp, manifest, qemu=qemu, timeout=build_timeout)
         (tmp / "manifest.json").write_text(json.dumps(manifest, indent=2) + "\n")
-        install(tmp, out_dir, make_products(manifest["name"]))  # (files a user added to an older bundle stay)
+        install(tmp, out_dir, "bundle", make_products(manifest["name"]))  # (files a user added to an older bundle stay)
     except BaseException as exc:
         shutil.rmtree(tmp, ignore_errors=True)
         _remove_created(created)
