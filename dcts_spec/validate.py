@@ -17,7 +17,7 @@ from .spec import Diagnostic, Spec, SpecError, load_spec
 from .spec.errors import did_you_mean
 from .spec.tasks import TaskSpec
 from .spec.types import size_of
-from .spec.units import to_si
+from .spec.units import joint_to_si, to_si
 from .validate_collision import CollisionReport, check_collision
 from .validate_parameters import check_parameters
 from .tasks import CartesianTask, JointTask, make_task, task_dimension, task_joints
@@ -238,7 +238,7 @@ def _position_targets(spec: Spec) -> list[tuple[str, tuple, str, np.ndarray]]:
 def initial_configuration(spec: Spec, robot: Robot) -> np.ndarray:
     """The scenario's initial q, or the middle of the joint range."""
     if spec.scenario is not None and spec.scenario.initial_q is not None:
-        return np.array(to_si(list(spec.scenario.initial_q), spec.scenario.unit))
+        return np.array(joint_to_si(list(spec.scenario.initial_q), spec.scenario.unit, robot.prismatic))
     return robot.neutral_configuration()
 
 
@@ -279,8 +279,10 @@ def _targets_beyond_range(spec: Spec, robot: Robot, task: TaskSpec, at: tuple) -
     """A joint target outside the joint's position range (a warning: the joint stops at its limit
     and the level gives way there, which may be what was meant)."""
     ref, lim, prismatic, diags = task.reference, robot.limits, robot.prismatic, []
-    for i, (name, value) in enumerate(zip(task_joints(task, robot), to_si(list(ref.q), ref.unit), strict=True)):
-        j = robot.joint_names.index(name)
+    names = task_joints(task, robot)
+    indices = [robot.joint_names.index(name) for name in names]
+    values = joint_to_si(list(ref.q), ref.unit, prismatic[indices])
+    for i, (name, j, value) in enumerate(zip(names, indices, values, strict=True)):
         unit = "m" if prismatic[j] else ref.unit
         scale = 1.0 if prismatic[j] else to_si(1.0, ref.unit)
         lo, hi = lim.q_min[j], lim.q_max[j]
@@ -327,14 +329,15 @@ def _check_scenario(spec: Spec, robot: Robot) -> list[Diagnostic]:
         if value is not None and len(value) != n:
             diags.append(src.diagnostic(at + (name,), f"{len(value)} values for {n} joints"))
     if sc.initial_q is not None and len(sc.initial_q) == n:
-        q0 = np.array(to_si(list(sc.initial_q), sc.unit))
+        q0 = np.array(joint_to_si(list(sc.initial_q), sc.unit, robot.prismatic))
         outside = np.flatnonzero((q0 < robot.limits.q_min) | (q0 > robot.limits.q_max))
         if outside.size:
-            unit = sc.unit
-            scale = 180.0 / np.pi if unit == "deg" else 1.0
-            where = "; ".join(f"joint {j + 1} ({robot.joint_names[j]}) at {q0[j] * scale:.4g}, limits "
-                              f"[{robot.limits.q_min[j] * scale:.4g}, {robot.limits.q_max[j] * scale:.4g}] {unit}"
-                              for j in outside)
+            prismatic = robot.prismatic
+            unit = ["m" if p else sc.unit for p in prismatic]
+            scale = np.where(prismatic, 1.0, 180.0 / np.pi if sc.unit == "deg" else 1.0)
+            where = "; ".join(f"joint {j + 1} ({robot.joint_names[j]}) at {q0[j] * scale[j]:.4g}, limits "
+                              f"[{robot.limits.q_min[j] * scale[j]:.4g}, {robot.limits.q_max[j] * scale[j]:.4g}] "
+                              f"{unit[j]}" for j in outside)
             diags.append(src.diagnostic(at + ("initial_q",), f"joints start outside their position limits: {where}"))
     frames = [f.name for f in robot.model.frames]
     for i, d in enumerate(sc.disturbances):

@@ -165,7 +165,7 @@ def test_grids_cross_and_start_states_stay_within_the_limits() -> None:
     samples = [sampler.sample(i) for i in range(sampler.count)]
     assert [(s.value("payloads", 0, "mass"), s.formulation) for s in samples] == [
         (m, f) for m in (1.0, 2.0) for f in ("dcts", "osc") for _ in range(3)]
-    joints = JointRange(np.zeros(7), -np.arange(1.0, 8.0), np.arange(1.0, 8.0))
+    joints = JointRange(np.zeros(7), -np.arange(1.0, 8.0), np.arange(1.0, 8.0), np.zeros(7, dtype=bool))
     for sample in samples:
         data = sample_spec_data({"scenario": {"duration": 2.0, "unit": "deg"}}, campaign, sample, joints)
         q = np.array(data["scenario"]["initial_q"])

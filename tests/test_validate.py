@@ -276,6 +276,44 @@ def test_summary_gives_a_prismatic_joint_in_metres(tmp_path: Path) -> None:
     assert "(m, m/s, N, m/s² for the prismatic torso_lift_joint" in "\n".join(lines)
 
 
+LIFT_URDF = """<robot name="lift">
+  <link name="base"/>
+  <link name="carriage"><inertial><mass value="5"/><origin xyz="0 0 0"/><inertia ixx="0.1" iyy="0.1" izz="0.1" ixy="0" ixz="0" iyz="0"/></inertial></link>
+  <link name="upper"><inertial><mass value="2"/><origin xyz="0.2 0 0"/><inertia ixx="0.02" iyy="0.02" izz="0.02" ixy="0" ixz="0" iyz="0"/></inertial></link>
+  <link name="fore"><inertial><mass value="1"/><origin xyz="0.15 0 0"/><inertia ixx="0.01" iyy="0.01" izz="0.01" ixy="0" ixz="0" iyz="0"/></inertial></link>
+  <joint name="lift" type="prismatic"><parent link="base"/><child link="carriage"/><axis xyz="0 0 1"/><limit lower="0" upper="0.5" velocity="0.3" effort="500"/></joint>
+  <joint name="shoulder" type="revolute"><parent link="carriage"/><child link="upper"/><axis xyz="0 0 1"/><limit lower="-2" upper="2" velocity="2" effort="50"/></joint>
+  <joint name="elbow" type="revolute"><parent link="upper"/><child link="fore"/><origin xyz="0.4 0 0"/><axis xyz="0 0 1"/><limit lower="-2" upper="2" velocity="2" effort="50"/></joint>
+</robot>
+"""
+
+
+def test_a_prismatic_joints_values_stay_in_metres_under_an_angle_unit(tmp_path: Path) -> None:
+    """`unit: deg` converts the revolute joints' values only, as the schema says: a torso lift's
+    0.2 m start became 0.0035 m, its limits and its posture target with it."""
+    from dcts_spec.sim.scenario import resolve_scenario
+    from dcts_spec.tasks import make_task
+
+    (tmp_path / "lift.urdf").write_text(LIFT_URDF)
+    spec = tmp_path / "lift.yaml"
+    spec.write_text(
+        "version: 1\nname: lift\nrobot: {urdf: lift.urdf}\nlimits:\n"
+        "  joint_position: {min: [0.05, -90, -90], max: [0.4, 90, 90], unit: deg}\n"
+        "  joint_velocity: {max: [0.25, 90, 90], unit: deg/s}\n"
+        "tasks:\n  - {name: posture, type: joint, priority: 1, gains: {kp: 10, kd: 6}, "
+        "reference: {q: [0.2, 10, 20], unit: deg}}\n"
+        "scenario: {duration: 0.1, initial_q: [0.3, 10, 20], initial_dq: [0.1, 5, 0], unit: deg}\n")
+    report = validate_file(spec)
+    assert not [d for d in report.diagnostics if d.severity == "error"], report.diagnostics
+    robot, limits = report.robot, report.robot.limits
+    assert list(robot.prismatic) == [True, False, False]
+    assert (limits.q_min[0], limits.q_max[0], limits.v_max[0]) == (0.05, 0.4, 0.25)
+    assert limits.q_max[1] == pytest.approx(math.pi / 2) and limits.v_max[2] == pytest.approx(math.pi / 2)
+    assert report.initial_q[:2] == pytest.approx([0.3, math.radians(10)])
+    assert make_task(report.spec.tasks[0], robot).q == pytest.approx([0.2, math.radians(10), math.radians(20)])
+    assert resolve_scenario(report.spec, robot).dq0[:2] == pytest.approx([0.1, math.radians(5)])
+
+
 def test_summary_words_cartesian_bounds_like_the_run_summary(tmp_path: Path) -> None:
     """One-sided bounds leave out the infinite side, with the unit on each number."""
     spec = tmp_path / "bounded.yaml"

@@ -58,7 +58,8 @@ class SampleRunner:
         self.campaign = load_campaign_text(inputs.campaign_text, inputs.campaign_file)
         self.sampler = Sampler(self.campaign, self.robot.nv)
         limits = self.robot.limits
-        self.joints = JointRange(initial_configuration(self.spec, self.robot), limits.q_min, limits.q_max)
+        self.joints = JointRange(initial_configuration(self.spec, self.robot), limits.q_min, limits.q_max,
+                                 self.robot.prismatic)
         self.primary_task = min(self.spec.tasks, key=lambda t: t.priority).name
         self._bundles: dict[tuple[str | None, float], Path] = {}
         # The symbolic problem the analysis evaluates: the samples change the scenario (and perhaps

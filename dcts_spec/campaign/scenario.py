@@ -16,18 +16,23 @@ import numpy as np
 import yaml
 
 from ..spec.errors import format_path
-from ..spec.units import to_si
+from ..spec.units import joint_to_si
 from .document import Campaign, ForceMagnitude
 from .sampling import Sample
 
 
 @dataclass(frozen=True)
 class JointRange:
-    """The robot's joint position limits and the spec's start (rad), for initial states."""
+    """The robot's joint position limits and the spec's start (SI), for initial states."""
 
     q0: np.ndarray
     q_min: np.ndarray
     q_max: np.ndarray
+    prismatic: np.ndarray  # per joint: its values are in m whatever the angle unit
+
+    def to_si(self, values: list[float], unit: str) -> list[float]:
+        """Per-joint values in an angle `unit` (or per s) in SI."""
+        return joint_to_si(values, unit, self.prismatic)
 
 
 def sample_spec_data(base: dict[str, Any], campaign: Campaign, sample: Sample, joints: JointRange) -> dict[str, Any]:
@@ -94,10 +99,10 @@ def _initial_state(scenario: dict, campaign: Campaign, sample: Sample, joints: J
         low = joints.q_min + state.within_limits * span
         q = low + np.array(_per_joint(sample, ("initial_state", "within_limits"), len(joints.q0))) * (1 - 2 * state.within_limits) * span
     else:
-        offset = np.array(to_si(_per_joint(sample, ("initial_state", "offset"), len(joints.q0)), state.unit))
+        offset = np.array(joints.to_si(_per_joint(sample, ("initial_state", "offset"), len(joints.q0)), state.unit))
         q = np.clip(joints.q0 + offset, joints.q_min, joints.q_max)
     if scenario.get("unit", "rad") != "rad" and scenario.get("initial_dq") is not None:
-        scenario["initial_dq"] = [float(v) for v in to_si(list(scenario["initial_dq"]), f"{scenario['unit']}/s")]
+        scenario["initial_dq"] = joints.to_si(list(scenario["initial_dq"]), f"{scenario['unit']}/s")
     scenario["unit"] = "rad"
     scenario["initial_q"] = [float(v) for v in q]
 

@@ -16,7 +16,7 @@ from ..spec.errors import KeyPath, did_you_mean
 from ..spec.limits import JointAccelerationLimits, JointTorqueLimits, JointVelocityLimits
 from ..spec.source import SourceMap
 from ..spec.types import as_list, size_of
-from ..spec.units import to_si
+from ..spec.units import joint_to_si, to_si
 from .builtin import builtin_locked_joints, builtin_urdf_path, lock_joints
 from .model import CartesianBound, JointLimits, Robot, is_prismatic, no_position_range
 from .urdf import build_model
@@ -45,7 +45,8 @@ def resolve_robot(spec: Spec) -> tuple[Robot, list[Diagnostic]]:
         diags.append(src.diagnostic(
             ("robot",), f"the URDF gives {', '.join(rangeless)} no position range (lower = upper): driven without "
                         f"position limits; give limits.joint_position to bound them", "warning"))
-    limits = _merge_limits(spec, urdf_limits, model.nv, diags)
+    prismatic = np.array([is_prismatic(model.joints[j]) for j in range(1, model.njoints)], dtype=bool)
+    limits = _merge_limits(spec, urdf_limits, prismatic, diags)
     bounds = _cartesian_bounds(spec, model, diags)
     if any(d.severity == "error" for d in diags):
         raise SpecError(diags)
@@ -198,25 +199,28 @@ def _add_frames(spec: Spec, model: pin.Model, diags: list[Diagnostic]) -> None:
 
 
 def _vector(
-    value: float | tuple[float, ...], unit: str, n: int, path: KeyPath, src: SourceMap, diags: list[Diagnostic], what: str
+    value: float | tuple[float, ...], unit: str, prismatic: np.ndarray, path: KeyPath, src: SourceMap,
+    diags: list[Diagnostic], what: str
 ) -> np.ndarray | None:
-    """A scalar-or-vector limit in SI, or None (with a diagnostic) if its size is wrong."""
+    """A scalar-or-vector joint limit in SI (a prismatic joint's in m), or None (with a diagnostic)
+    if its size is wrong."""
+    n = prismatic.size
     size = size_of(value)
     if size is not None and size != n:
         diags.append(src.diagnostic(path, f"{what} has {size} values but the robot has {n} joints"))
         return None
-    return np.array(to_si(as_list(value, n), unit), dtype=float)
+    return np.array(joint_to_si(as_list(value, n), unit, prismatic), dtype=float)
 
 
-def _merge_limits(spec: Spec, urdf: JointLimits, n: int, diags: list[Diagnostic]) -> JointLimits:
+def _merge_limits(spec: Spec, urdf: JointLimits, prismatic: np.ndarray, diags: list[Diagnostic]) -> JointLimits:
     """Spec limits override the URDF's; wider than the URDF only when explicitly allowed."""
     src = spec.source
     lim = spec.limits
     q_min, q_max = urdf.q_min, urdf.q_max
     if (jp := lim.joint_position) is not None:
         base = ("limits", "joint_position")
-        lo = _vector(jp.min, jp.unit, n, base + ("min",), src, diags, "min") if jp.min is not None else q_min
-        hi = _vector(jp.max, jp.unit, n, base + ("max",), src, diags, "max") if jp.max is not None else q_max
+        lo = _vector(jp.min, jp.unit, prismatic, base + ("min",), src, diags, "min") if jp.min is not None else q_min
+        hi = _vector(jp.max, jp.unit, prismatic, base + ("max",), src, diags, "max") if jp.max is not None else q_max
         if lo is not None and hi is not None:
             bad = np.flatnonzero(lo >= hi)
             if bad.size:
@@ -229,9 +233,9 @@ def _merge_limits(spec: Spec, urdf: JointLimits, n: int, diags: list[Diagnostic]
             _outside(hi, urdf.q_max, hi > urdf.q_max + 1e-9, "rad", base + ("max",), "above the URDF's upper limit",
                      jp.allow_outside_urdf, src, diags)
             q_min, q_max = lo, hi
-    v_max = _symmetric(lim.joint_velocity, "joint_velocity", urdf.v_max, "velocity", "rad/s", n, src, diags)
-    a_max = _symmetric(lim.joint_acceleration, "joint_acceleration", urdf.a_max, None, "rad/s²", n, src, diags)
-    tau_max = _symmetric(lim.joint_torque, "joint_torque", urdf.tau_max, "effort", "Nm", n, src, diags)
+    v_max = _symmetric(lim.joint_velocity, "joint_velocity", urdf.v_max, "velocity", "rad/s", prismatic, src, diags)
+    a_max = _symmetric(lim.joint_acceleration, "joint_acceleration", urdf.a_max, None, "rad/s²", prismatic, src, diags)
+    tau_max = _symmetric(lim.joint_torque, "joint_torque", urdf.tau_max, "effort", "Nm", prismatic, src, diags)
     return JointLimits(q_min=q_min, q_max=q_max, v_max=v_max, tau_max=tau_max, a_max=a_max)
 
 
@@ -241,7 +245,7 @@ def _symmetric(
     urdf: np.ndarray,
     urdf_name: str | None,
     unit: str,
-    n: int,
+    prismatic: np.ndarray,
     src: SourceMap,
     diags: list[Diagnostic],
 ) -> np.ndarray:
@@ -252,7 +256,7 @@ def _symmetric(
     if section is None:
         return urdf
     path = ("limits", key, "max")
-    values = _vector(section.max, section.unit, n, path, src, diags, "max")
+    values = _vector(section.max, section.unit, prismatic, path, src, diags, "max")
     if values is None:
         return urdf
     _positive(values, unit, path, src, diags)

@@ -7,7 +7,7 @@ import pinocchio as pin
 
 from ..robot.model import Robot
 from ..spec.scenario import Waypoints
-from ..spec.units import to_si
+from ..spec.units import joint_to_si, to_si
 from ..tasks import CartesianTask, JointTask, ReferenceInput, Task
 from .paths import Segment, segment_duration
 
@@ -56,6 +56,8 @@ class WaypointFollower:
         self.tolerance = float(waypoints.tolerance)
         entries = [r for r in layout if r.task == task.name and r.field in ("position", "rpy", "q")]
         self.slices = [(r.field, r.offset, r.size) for r in entries]
+        # (a joint task's prismatic joints in m whatever the unit)
+        self._prismatic = robot.prismatic[task.joint_indices] if isinstance(task, JointTask) else None
         self.points = [self._to_si(np.array(p, dtype=float), waypoints.unit) for p in waypoints.points]
         self.reached_at = np.full(len(self.points), np.nan)
         self.index = 0
@@ -69,8 +71,10 @@ class WaypointFollower:
     def _to_si(self, point: np.ndarray, unit: str) -> np.ndarray:
         out, start = point.copy(), 0
         for field, _, size in self.slices:
-            if field in ("rpy", "q"):
+            if field == "rpy":
                 out[start: start + size] = to_si(list(point[start: start + size]), unit)
+            elif field == "q":
+                out[start: start + size] = joint_to_si(list(point[start: start + size]), unit, self._prismatic)
             start += size
         return out
 

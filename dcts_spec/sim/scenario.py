@@ -10,7 +10,7 @@ import numpy as np
 from ..robot.model import Robot
 from ..spec import Spec, SpecError
 from ..spec.scenario import ExternalTorqueSensing, ParameterChange, Waypoints
-from ..spec.units import to_si
+from ..spec.units import joint_to_si
 from ..validate import initial_configuration
 from .mujoco_model import Payload
 
@@ -84,7 +84,8 @@ def resolve_scenario(spec: Spec, robot: Robot) -> Scenario:
         raise SpecError([spec.source.diagnostic(
             (), "the spec has no `scenario` section: add one (at least `scenario: {duration: 2.0}`) to simulate it")])
     n = robot.nv
-    dq0 = np.zeros(n) if sc.initial_dq is None else np.array(to_si(list(sc.initial_dq), f"{sc.unit}/s"))
+    dq0 = np.zeros(n) if sc.initial_dq is None else np.array(joint_to_si(list(sc.initial_dq), f"{sc.unit}/s",
+                                                                          robot.prismatic))
     pushes, profiles = [], []
     for d in sc.disturbances:
         if d.type == "force":

@@ -29,3 +29,11 @@ def to_si(value: float | Sequence[float] | None, unit: str) -> float | list[floa
     if isinstance(value, (int, float)):
         return float(value) * factor
     return [float(v) * factor for v in value]
+
+
+def joint_to_si(values: Sequence[float], unit: str, prismatic: Sequence[bool]) -> list[float]:
+    """Per-joint values (positions, or per s, per s²) from an angle `unit` to SI. A prismatic
+    joint's values are in m (m/s, m/s²) whatever the unit says: `unit: deg` converted a torso
+    lift's 0.2 m start to 0.0035 m, and its limits with it."""
+    factor = _FACTORS[unit]
+    return [float(v) * (1.0 if p else factor) for v, p in zip(values, prismatic, strict=True)]

@@ -8,7 +8,7 @@ from ..robot.model import Robot
 from ..spec.tasks import TaskSpec
 from ..spec.types import as_list
 from ..limits.naming import joint_unit
-from ..spec.units import to_si
+from ..spec.units import joint_to_si, to_si
 from .base import ReferenceInput, Task, TaskTerms
 from .cartesian import CartesianTask, OrientationTask, PoseTask, PositionTask
 from .joint import JointTask
@@ -43,7 +43,8 @@ def make_task(spec: TaskSpec, robot: Robot) -> Task:
     if spec.type == "joint":
         names = task_joints(spec, robot)
         indices = [robot.joint_names.index(j) for j in names]
-        q = None if ref is None or ref.q is None else np.array(to_si(list(ref.q), ref.unit))
+        q = None if ref is None or ref.q is None else np.array(joint_to_si(list(ref.q), ref.unit,
+                                                                           robot.prismatic[indices]))
         units = [joint_unit(robot, j) for j in indices]
         wrapped = [unit == "rad" and robot.limits.unbounded(j) for unit, j in zip(units, indices, strict=True)]
         return JointTask(spec.name, spec.priority, indices, names, robot.nv, q=q, units=units, wrapped=wrapped,
