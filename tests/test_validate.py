@@ -314,6 +314,35 @@ def test_a_prismatic_joints_values_stay_in_metres_under_an_angle_unit(tmp_path: 
     assert resolve_scenario(report.spec, robot).dq0[:2] == pytest.approx([0.1, math.radians(5)])
 
 
+@pytest.mark.parametrize(("inertia", "severity", "words"), [
+    ('ixx="0.02" iyy="0.02" izz="0.05" ixy="0" ixz="0" iyz="0"', "warning", "break A + B ≥ C"),  # (CAD rounding)
+    ('ixx="0.02" iyy="0.02" izz="0.02" ixy="0.05" ixz="0" iyz="0"', "error", "not positive definite"),
+    ('ixx="0.02" iyy="0.02" izz="0.02" ixy="0" ixz="0" iyz="0" mass="-2"', "error", "negative mass (-2 kg)"),
+])
+def test_an_unphysical_inertia_is_named_at_validation(tmp_path: Path, inertia: str, severity: str, words: str) -> None:
+    """MuJoCo refused such a body and the simulation ended in an internal error (exit 3); a body
+    that only breaks A + B ≥ C is simulated balanced."""
+    upper = '<mass value="2"/><origin xyz="0.2 0 0"/><inertia ixx="0.02" iyy="0.02" izz="0.02" ixy="0" ixz="0" iyz="0"/>'
+    mass = re.search(r'mass="(-?[0-9.]+)"', inertia)
+    changed = f'<mass value="{mass.group(1) if mass else 2}"/><origin xyz="0.2 0 0"/><inertia ' + \
+        re.sub(r' ?mass="-?[0-9.]+"', "", inertia) + "/>"
+    assert upper in LIFT_URDF
+    (tmp_path / "lift.urdf").write_text(LIFT_URDF.replace(upper, changed))
+    spec = tmp_path / "lift.yaml"
+    spec.write_text("version: 1\nname: lift\nrobot: {urdf: lift.urdf}\ntasks:\n  - {name: posture, type: joint, "
+                    "priority: 1, gains: {kp: 10, kd: 6}, reference: {q: [0.2, 0.1, 0.2]}}\nscenario: {duration: 0.05}\n")
+    if severity == "error":
+        with pytest.raises(SpecError) as info:
+            validate_file(spec)
+        assert "link upper (moved by joint shoulder)" in str(info.value) and words in str(info.value)
+        return
+    report = validate_file(spec)
+    assert any(d.severity == "warning" and "link upper's" in d.message and words in d.message
+               for d in report.diagnostics), report.diagnostics
+    result = dcts("simulate", str(spec), "--runtime", "python", "--no-plots", "-q", "-o", str(tmp_path / "run"))
+    assert result.returncode == 0, result.stderr
+
+
 def test_summary_words_cartesian_bounds_like_the_run_summary(tmp_path: Path) -> None:
     """One-sided bounds leave out the infinite side, with the unit on each number."""
     spec = tmp_path / "bounded.yaml"

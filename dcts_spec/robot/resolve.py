@@ -36,6 +36,7 @@ def resolve_robot(spec: Spec) -> tuple[Robot, list[Diagnostic]]:
     if model is None:
         raise SpecError(diags)
     _check_joint_types(model, src, diags)
+    _check_inertias(spec, model, diags)
     _check_moved_inertia(spec, model, diags)
     _add_frames(spec, model, diags)
     urdf_limits = JointLimits.of_model(model)
@@ -158,6 +159,44 @@ def _check_joint_types(model: pin.Model, src: SourceMap, diags: list[Diagnostic]
                     "prismatic joints are supported — lock it with robot.locked_joints",
                 )
             )
+
+
+def _check_inertias(spec: Spec, model: pin.Model, diags: list[Diagnostic]) -> None:
+    """Each body's mass and rotational inertia (a joint's child link with the links fixed to it)
+    must be physical. A negative mass, or an inertia that is not positive semi-definite, is an
+    error: M(q) may lose definiteness and MuJoCo refuses the body (the simulation ended in an
+    internal error). Principal moments that break A + B ≥ C (a common rounding of CAD exports) are
+    a warning: MuJoCo balances them (`balanceinertia`), the controller keeps the URDF's."""
+    for j in range(1, model.njoints):
+        inertia = model.inertias[j]
+        moments = np.linalg.eigvalsh(inertia.inertia)
+        link = _child_link(model, j)
+        scale = max(1e-12, float(np.abs(moments).max()))
+        if inertia.mass < 0:
+            problem = f"has a negative mass ({inertia.mass:.4g} kg)"
+        elif moments[0] < -1e-9 * scale:
+            problem = f"has an inertia that is not positive definite (principal moments {_moments(moments)} kg·m²)"
+        elif moments[0] + moments[1] < moments[2] - 1e-9 * scale:
+            diags.append(spec.source.diagnostic(_robot_key(spec), (
+                f"link {link}'s principal moments of inertia {_moments(moments)} kg·m² break A + B ≥ C, which every "
+                "rigid body's satisfy: the simulation (MuJoCo) balances them, the controller uses the URDF's"),
+                "warning"))
+            continue
+        else:
+            continue
+        diags.append(spec.source.diagnostic(_robot_key(spec), (
+            f"link {link} (moved by joint {model.names[j]}) {problem} in the URDF: no rigid body has one; "
+            "correct its <inertial>")))
+
+
+def _child_link(model: pin.Model, joint: int) -> str:
+    """The link a joint moves (its first body frame)."""
+    return next((f.name for f in model.frames if f.parentJoint == joint and f.type == pin.FrameType.BODY),
+                model.names[joint])
+
+
+def _moments(moments: np.ndarray) -> str:
+    return "[" + ", ".join(f"{m:.4g}" for m in moments) + "]"
 
 
 def _check_moved_inertia(spec: Spec, model: pin.Model, diags: list[Diagnostic]) -> None:

@@ -110,6 +110,9 @@ def build_mujoco_model(
     spec.modelname = model.name
     # Bodies carry the Pinocchio inertias; geoms must not add mass.
     spec.compiler.inertiafromgeom = mujoco.mjtInertiaFromGeom.mjINERTIAFROMGEOM_FALSE
+    # Principal moments that break A + B ≥ C (CAD rounding) are evened out instead of refused
+    # (validation warns: the controller keeps the URDF's)
+    spec.compiler.balanceinertia = True
     spec.option.timestep = timestep
     spec.option.integrator = _integrator(integrator)
     spec.option.gravity = model.gravity.linear
