@@ -343,6 +343,44 @@ def test_an_unphysical_inertia_is_named_at_validation(tmp_path: Path, inertia: s
     assert result.returncode == 0, result.stderr
 
 
+def test_a_mimic_joint_and_an_unreadable_inertial_are_warned_about(tmp_path: Path) -> None:
+    """Pinocchio drives a mimic joint as one of its own, and urdfdom reads an <inertial> it cannot
+    parse as none (its complaint went to a silenced stderr): both passed without a word."""
+    urdf = LIFT_URDF.replace('<limit lower="-2" upper="2" velocity="2" effort="50"/></joint>\n</robot>',
+                             '<limit lower="-2" upper="2" velocity="2" effort="50"/><mimic joint="shoulder"/>'
+                             '</joint>\n</robot>')
+    upper = 'izz="0.02" ixy="0" ixz="0" iyz="0"/></inertial></link>\n  <link name="fore">'
+    assert urdf != LIFT_URDF and upper in urdf
+    (tmp_path / "lift.urdf").write_text(urdf.replace(upper, upper.replace(' ixz="0"', "")))
+    spec = tmp_path / "lift.yaml"
+    spec.write_text("version: 1\nname: lift\nrobot: {urdf: lift.urdf}\ntasks:\n  - {name: posture, type: joint, "
+                    "priority: 1, gains: {kp: 10, kd: 6}, reference: {q: [0.2, 0.1, 0.2]}}\n")
+    warnings = [d.message for d in validate_file(spec).diagnostics if d.severity == "warning"]
+    assert any("joint elbow mimics shoulder" in m and "robot.locked_joints" in m for m in warnings), warnings
+    assert any("could not read" in m and "missing ixz" in m and "Link [upper]" in m for m in warnings), warnings
+    spec.write_text(spec.read_text().replace("robot: {urdf: lift.urdf}", "robot: {urdf: lift.urdf, locked_joints: {elbow: 0}}")
+                    .replace("[0.2, 0.1, 0.2]", "[0.2, 0.1]"))
+    assert not any("mimics" in d.message for d in validate_file(spec).diagnostics)
+
+
+def test_a_floating_root_is_described_as_one_and_locked_only_at_its_neutral(tmp_path: Path) -> None:
+    """describe called it a continuous joint, and a lock at 0.5 moved the base 0.5 m along x."""
+    urdf = LIFT_URDF.replace('<link name="base"/>', '<link name="world"/>\n  <link name="base"/>\n  <joint name="root" '
+                             'type="floating"><parent link="world"/><child link="base"/></joint>')
+    (tmp_path / "lift.urdf").write_text(urdf)
+    rows = {j.name: j.type for j in describe(str(tmp_path / "lift.urdf")).joints}
+    assert rows["root"] == "floating (6 DOF)" and rows["lift"] == "prismatic"
+    spec = tmp_path / "lift.yaml"
+    text = ("version: 1\nname: lift\nrobot: {urdf: lift.urdf, locked_joints: {root: 0.5}}\ntasks:\n  - {name: posture, "
+            "type: joint, priority: 1, gains: {kp: 10, kd: 6}, reference: {q: [0.2, 0.1, 0.2]}}\n")
+    spec.write_text(text)
+    with pytest.raises(SpecError) as info:
+        validate_file(spec)
+    assert "lift.yaml:3:" in str(info.value) and "root is a floating joint" in str(info.value)
+    spec.write_text(text.replace("root: 0.5", "root: 0"))
+    assert validate_file(spec).robot.nv == 3
+
+
 def test_summary_words_cartesian_bounds_like_the_run_summary(tmp_path: Path) -> None:
     """One-sided bounds leave out the infinite side, with the unit on each number."""
     spec = tmp_path / "bounded.yaml"

@@ -17,8 +17,8 @@ import pinocchio as pin
 
 from ..spec import load_spec
 from .builtin import BUILTIN_ROBOTS, builtin_locked_joints, builtin_urdf_path, load_builtin_model
-from .model import JointLimits, is_prismatic
-from .resolve import _quiet_stderr, locked_joints, resolve_robot
+from .model import JointLimits, is_prismatic, multi_dof_kind
+from .resolve import captured_stderr, locked_joints, resolve_robot
 from .urdf import build_model
 
 FRAME_KINDS = {pin.FrameType.BODY: "link", pin.FrameType.JOINT: "joint", pin.FrameType.FIXED_JOINT: "fixed joint",
@@ -149,7 +149,7 @@ def describe(target: str) -> RobotDescription:
 
 def _load_urdf(path: Path) -> pin.Model:
     try:
-        with _quiet_stderr():  # urdfdom prints its complaint itself; the message below says it
+        with captured_stderr():  # urdfdom prints its complaint itself; the message below says it
             model = build_model(path)
     except Exception as error:  # Pinocchio raises plain RuntimeErrors for bad URDFs
         raise DescribeError(f"cannot load the URDF {path}: {error}") from None
@@ -166,6 +166,10 @@ def _description(name: str, source: str, urdf: Path, model: pin.Model, limits: J
         kind = "prismatic" if is_prismatic(joint) else "revolute"
         unit = "m" if kind == "prismatic" else "rad"
         q, v = joint.idx_q, joint.idx_v
+        if joint.nv != 1:  # (a floating base: validation asks to lock it)
+            none = Limit(None, None, "")
+            joints.append(Joint(model.names[jid], f"{multi_dof_kind(joint)} ({joint.nv} DOF)", none, none, none))
+            continue
         if kind == "revolute" and limits.unbounded(q):
             kind = "continuous"  # (a URDF continuous joint, read as a revolute one: robot/urdf.py)
         position = Limit(_finite(limits.q_min[q]), _finite(limits.q_max[q]), unit)

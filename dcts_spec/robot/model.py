@@ -78,6 +78,16 @@ class CartesianBound:
         return np.asarray(position) @ np.asarray(self.direction)
 
 
+# Joints of several degrees of freedom by Pinocchio's name (validation asks to lock them)
+_MULTI_DOF_KINDS = {"JointModelFreeFlyer": "floating", "JointModelPlanar": "planar", "JointModelSpherical": "spherical",
+                    "JointModelSphericalZYX": "spherical"}
+
+
+def multi_dof_kind(joint: pin.JointModel) -> str:
+    """'floating', 'planar', 'spherical' (or Pinocchio's name) for a joint of several DOF."""
+    return _MULTI_DOF_KINDS.get(joint.shortname(), joint.shortname())
+
+
 def is_prismatic(joint: pin.JointModel) -> bool:
     """Does the joint translate (m, m/s, N) rather than rotate? From Pinocchio's joint model name
     (JointModelPZ, JointModelPrismaticUnaligned, … against JointModelRZ, …)."""

@@ -6,6 +6,8 @@ import contextlib
 import difflib
 import os
 import sys
+import tempfile
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -18,8 +20,8 @@ from ..spec.source import SourceMap
 from ..spec.types import as_list, size_of
 from ..spec.units import joint_to_si, to_si
 from .builtin import builtin_locked_joints, builtin_urdf_path, lock_joints
-from .model import CartesianBound, JointLimits, Robot, is_prismatic, no_position_range
-from .urdf import build_model
+from .model import CartesianBound, JointLimits, Robot, is_prismatic, multi_dof_kind, no_position_range
+from .urdf import build_model, mimic_joints
 
 AXIS_INDEX = {"x": 0, "y": 1, "z": 2}
 # A joint moving less inertia than this, relative to the largest joint's (kg·m² or kg), moves
@@ -102,11 +104,22 @@ def _load_model(spec: Spec, diags: list[Diagnostic]) -> tuple[pin.Model | None, 
             diags.append(src.diagnostic(where, message))
             return None, path
     try:
-        with _quiet_stderr():  # urdfdom prints its parser's complaint itself; the diagnostic says it
+        with captured_stderr() as parser_messages:  # (urdfdom prints its complaints itself)
             full = build_model(path)
     except Exception as exc:  # Pinocchio raises plain RuntimeErrors for bad URDFs
         diags.append(src.diagnostic(where, f"cannot load the URDF {path}: {exc}"))
         return None, path
+    skipped = [line.removeprefix("Error:").strip() for line in parser_messages if line.startswith("Error:")]
+    if skipped:  # (urdfdom goes on without an element it cannot parse: a link's inertial read as none)
+        diags.append(src.diagnostic(where, f"the URDF parser skipped what it could not read ({'; '.join(skipped)}): "
+                                           "that part counts as absent (an <inertial> as no mass); correct the URDF",
+                                    "warning"))
+    for joint, leader in mimic_joints(path).items():
+        if joint in full.names and joint not in locked:
+            diags.append(src.diagnostic(where, (
+                f"joint {joint} mimics {leader} in the URDF, which dcts does not model: it is driven as a joint "
+                f"of its own; lock it with robot.locked_joints (and {leader} if they must move together)"),
+                "warning"))
     known = set(full.names)
     unknown = [j for j in locked if j not in known]
     for j in unknown:
@@ -117,6 +130,12 @@ def _load_model(spec: Spec, diags: list[Diagnostic]) -> tuple[pin.Model | None, 
     outside = False
     for name, value in locked.items():
         joint = full.joints[full.getJointId(name)]
+        if joint.nq != 1 and value != 0:  # (the value went into the first coordinate: a floating base's x)
+            diags.append(src.diagnostic(("robot", "locked_joints", name), (
+                f"{name} is a {multi_dof_kind(joint)} joint ({joint.nq} position coordinates), which one value "
+                f"cannot place: lock it at 0, its neutral position (the URDF's placement of its child link)")))
+            outside = True
+            continue
         lo, hi = full.lowerPositionLimit[joint.idx_q], full.upperPositionLimit[joint.idx_q]
         if joint.nq == 1 and lo < hi and not lo - 1e-9 <= value <= hi + 1e-9:
             unit = "m" if is_prismatic(joint) else "rad"
@@ -135,16 +154,22 @@ def _load_model(spec: Spec, diags: list[Diagnostic]) -> tuple[pin.Model | None, 
 
 
 @contextlib.contextmanager
-def _quiet_stderr():
-    """Silence the process's stderr (file descriptor 2, which C++ libraries write to directly)."""
+def captured_stderr() -> Iterator[list[str]]:
+    """Capture the process's stderr (file descriptor 2, which C++ libraries write to directly):
+    the yielded list holds its lines once the block ends."""
+    lines: list[str] = []
     sys.stderr.flush()
     saved = os.dup(2)
     try:
-        with open(os.devnull, "w") as null:
-            os.dup2(null.fileno(), 2)
-            yield
+        with tempfile.TemporaryFile(mode="w+", encoding="utf-8", errors="replace") as capture:
+            os.dup2(capture.fileno(), 2)
+            try:
+                yield lines
+            finally:
+                os.dup2(saved, 2)
+                capture.seek(0)
+                lines.extend(capture.read().splitlines())
     finally:
-        os.dup2(saved, 2)
         os.close(saved)
 
 

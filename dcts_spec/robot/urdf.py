@@ -37,6 +37,14 @@ def revolute_from_continuous(root: ElementTree.Element) -> list[str]:
     return names
 
 
+def mimic_joints(path: Path) -> dict[str, str]:
+    """The URDF's mimic joints: joint name → the joint it follows. Pinocchio reads them as joints
+    of their own, which the controller would drive independently."""
+    root = ElementTree.parse(path).getroot()
+    return {joint.get("name", "?"): mimic.get("joint", "?") for joint in root.iter("joint")
+            if (mimic := joint.find("mimic")) is not None}
+
+
 def build_model(path: Path) -> pin.Model:
     """Pinocchio's model of the URDF at `path`, its continuous joints made revolute. Raises what
     Pinocchio raises for a URDF it cannot read (and ElementTree's ParseError for a file that is
