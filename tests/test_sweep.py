@@ -123,6 +123,21 @@ def test_campaign_errors_are_located_and_say_what_is_allowed() -> None:
     assert any(m.startswith("c.yaml:22:") and "its own C bundle" in m for m in messages), messages
 
 
+@pytest.mark.parametrize(("old", "new", "line", "words"), [
+    ("noise_std: {uniform: [0, 0.5]}", "noise_std: {uniform: [-1, 0.5]}", 14, "values from -1 to 0.5: must be ≥ 0"),
+    ("noise_std: {uniform: [0, 0.5]}", "noise_std: {normal: [0, 0.5]}", 14, "a normal draw can fall below 0"),
+    ("mass: {uniform: [0.5, 2.5]}", "mass: {choice: [0, 1]}", 13, "values from 0 to 1: must be > 0 and ≤ 1e4 kg"),
+    ("duration: {choice: [0.05, 0.1]}", "duration: -0.1", 10, "values -0.1: must be > 0"),
+])
+def test_a_draw_the_spec_would_refuse_is_an_error_in_the_campaign(old, new, line, words) -> None:
+    """Every sample was invalid, with the error blamed on the spec's scenario line."""
+    assert old in CAMPAIGN
+    with pytest.raises(SpecError) as caught:
+        load_campaign_text(CAMPAIGN.replace(old, new), "c.yaml")
+    messages = [str(d) for d in caught.value.diagnostics]
+    assert any(m.startswith(f"c.yaml:{line}:") and words in m for m in messages), messages
+
+
 def test_campaign_names_checked_against_the_spec(spec_file, tmp_path) -> None:
     campaign = tmp_path / "c.yaml"
     campaign.write_text(CAMPAIGN.replace("body: link7", "body: link77").replace("primary_rms_error,", "primary_rms,"))
@@ -143,6 +158,21 @@ def test_campaign_names_checked_against_the_spec(spec_file, tmp_path) -> None:
     assert f"{campaign}:18:" in result.stderr and "'tool_position.kq' is not a run-time parameter" in result.stderr
     assert f"{campaign}:19:" in result.stderr and "leave the allowed range [0, 1e+08]" in result.stderr
     assert not (tmp_path / "out").exists()  # (it held campaign.json, and the fixed campaign was refused there)
+
+
+def test_one_range_for_every_joint_is_checked_against_each_joints_limit(spec_file, tmp_path) -> None:
+    """A velocity limit drawn from [2, 3] rad/s for all joints passed (it was checked against
+    the largest joint's envelope) and every sample was invalid."""
+    spec = tmp_path / "spec.yaml"
+    spec.write_text(spec_file.read_text().replace("parameters:\n  tasks: {tool_position: [kp]}",
+                                                  "parameters:\n  tasks: {tool_position: [kp]}\n  limits: [joint_velocity]"))
+    campaign = tmp_path / "c.yaml"
+    campaign.write_text(CAMPAIGN.replace("tool_position.kp: {loguniform: [50, 400]}",
+                                         "joint_velocity.max: {uniform: [2, 3]}"))
+    result = invoke("sweep", str(spec), "--campaign", str(campaign), "-o", str(tmp_path / "out"), "--serial", "-q")
+    assert result.exit_code == 1 and f"{campaign}:18:" in result.stderr, result.output
+    assert "leave the allowed range (0, 1.74533] rad/s" in result.stderr and "what all its components allow" in result.stderr
+    assert not (tmp_path / "out").exists()
 
 
 def test_samples_are_drawn_from_seed_and_index_alone() -> None:

@@ -15,13 +15,14 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Annotated, Any, Literal, get_args
 
-from pydantic import BeforeValidator, Field, WithJsonSchema, model_validator
+from pydantic import AfterValidator, BeforeValidator, Field, WithJsonSchema, model_validator
 
 from ..spec.controller import Formulation
 from ..spec.errors import shown
 from ..spec.loader import document_from_data
+from ..spec.scenario import MASS_SCALE, NOISE_STD, PAYLOAD_MASS
 from ..spec.source import SourceMap, read_yaml, read_yaml_file
-from ..spec.types import DURATION, FieldError, Integer, Number, Range, StrictModel
+from ..spec.types import DURATION, TIME, TORQUE, FieldError, Integer, Number, Range, StrictModel
 from ..spec.units import AngleUnit
 
 KINDS = ("uniform", "loguniform", "normal", "choice", "grid")
@@ -92,6 +93,26 @@ Value = Annotated[Distribution, BeforeValidator(_fixed_or_distribution), WithJso
 Vec3Value = tuple[Value, Value, Value]
 
 
+def within(limits: Range) -> AfterValidator:
+    """A Value whose every draw the spec's key accepts (`limits`, the spec's range there), checked
+    where the campaign says it: a draw outside made the sample invalid, blamed on the spec's line."""
+    def check(value: Distribution) -> Distribution:
+        bounds = value.bounds
+        if bounds is None:
+            if limits.low >= 0:  # (a normal draw takes any value)
+                raise ValueError(f"a normal draw can fall below {limits.low:g}, which this value may not: use "
+                                 "uniform, loguniform, choice or grid")
+            return value
+        for v in bounds:
+            try:
+                limits.check(v)
+            except ValueError as error:
+                shown_bounds = f"{bounds[0]:g}" if bounds[0] == bounds[1] else f"from {bounds[0]:g} to {bounds[1]:g}"
+                raise ValueError(f"values {shown_bounds}: {error}") from None
+        return value
+    return AfterValidator(check)
+
+
 class ForceMagnitude(StrictModel):
     """A force of a given size in a direction: fixed, or drawn per sample."""
 
@@ -114,15 +135,16 @@ class PushSweep(StrictModel):
     force: Vec3Value | ForceMagnitude = Field(description="[x, y, z] in N (world axes), or {magnitude, direction}",
                                               examples=[{"magnitude": {"uniform": [0, 80]}, "direction": "horizontal"}])
     point: Vec3Value = Field((0.0, 0.0, 0.0), validate_default=True, description="point in the body's frame, m", examples=[[0, 0, 0.05]])
-    start: Value = Field(description="s after the start of the run", examples=[{"uniform": [0.2, 0.8]}])
-    duration: Value = Field(description="s", examples=[{"choice": [0.05, 0.1, 0.2]}])
+    start: Annotated[Value, within(TIME)] = Field(description="s after the start of the run",
+                                                  examples=[{"uniform": [0.2, 0.8]}])
+    duration: Annotated[Value, within(DURATION)] = Field(description="s", examples=[{"choice": [0.05, 0.1, 0.2]}])
 
 
 class PayloadSweep(StrictModel):
     """A mass the controller does not know about (added to the spec's scenario payloads)."""
 
     frame: str = Field(description="link or frame it is attached to", examples=["tool"])
-    mass: Value = Field(description="kg (> 0)", examples=[{"uniform": [0.5, 3]}])
+    mass: Annotated[Value, within(PAYLOAD_MASS)] = Field(description="kg (> 0)", examples=[{"uniform": [0.5, 3]}])
     com: Vec3Value = Field((0.0, 0.0, 0.0), validate_default=True, description="centre of mass in the frame, m", examples=[[0, 0, 0.05]])
 
 
@@ -130,7 +152,7 @@ class MismatchSweep(StrictModel):
     """The controller's masses and inertias scaled by `mass_scale`: one C bundle per value, so only
     a fixed value, a choice or a grid."""
 
-    mass_scale: Value = Field(description="scale of the controller's masses (unitless)",
+    mass_scale: Annotated[Value, within(MASS_SCALE)] = Field(description="scale of the controller's masses (unitless)",
                               examples=[{"choice": [0.9, 1.0, 1.1]}])
 
     @model_validator(mode="after")
@@ -138,16 +160,15 @@ class MismatchSweep(StrictModel):
         if self.mass_scale.kind not in ("fixed", "choice", "grid"):
             raise FieldError("mass_scale", "each value needs its own C bundle: give a number, {choice: [...]} or "
                              f"{{grid: [...]}}, not {self.mass_scale.kind}")
-        if min(self.mass_scale.values) <= 0:
-            raise FieldError("mass_scale", f"values must be > 0, got {min(self.mass_scale.values):g}")
         return self
 
 
 class SensingSweep(StrictModel):
     """τ_ext noise and bias (the scenario's `external_torque: noisy`); the noise's seed is the sample's."""
 
-    noise_std: Value = Field(0.0, validate_default=True, description="Gaussian noise, Nm (one draw for all joints)", examples=[{"uniform": [0, 1]}])
-    bias: Value | list[Value] = Field(0.0, validate_default=True, description="constant offset, Nm: one value drawn for each joint, or a "
+    noise_std: Annotated[Value, within(NOISE_STD)] = Field(
+        0.0, validate_default=True, description="Gaussian noise, Nm (one draw for all joints)", examples=[{"uniform": [0, 1]}])
+    bias: Annotated[Value, within(TORQUE)] | list[Annotated[Value, within(TORQUE)]] = Field(0.0, validate_default=True, description="constant offset, Nm: one value drawn for each joint, or a "
                                       "list of one value per joint", examples=[{"normal": [0, 0.5]}])
 
 

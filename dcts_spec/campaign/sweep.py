@@ -277,10 +277,16 @@ def check_parameters(driver: SampleRunner) -> None:
             continue
         for k, d in enumerate(values):
             bounds = d.bounds
-            low, high = min(entry.lower), max(entry.upper)
-            if bounds is not None and (bounds[0] < low or bounds[1] > high):
+            # one distribution for all components: the range every one of them allows
+            components = [k] if isinstance(value, list) else range(entry.size)
+            low, high = max(entry.lower[c] for c in components), min(entry.upper[c] for c in components)
+            below = bounds is not None and (bounds[0] < low or (entry.lower_open and bounds[0] == low))
+            if bounds is not None and (below or bounds[1] > high):
                 where = at + ((k,) if isinstance(value, list) else ())
+                which = f" ({entry.components[k]})" if isinstance(value, list) else \
+                    (" (what all its components allow)" if entry.size > 1 else "")
                 diagnostics.append(src.diagnostic(where, f"values from {bounds[0]:g} to {bounds[1]:g} leave the "
-                                                  f"allowed range [{low:g}, {high:g}] {entry.unit}"))
+                                                  f"allowed range {'(' if entry.lower_open else '['}{low:g}, "
+                                                  f"{high:g}] {entry.unit}{which}"))
     if diagnostics:
         raise SpecError(diagnostics)

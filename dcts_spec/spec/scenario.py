@@ -37,11 +37,17 @@ class JointTorqueDisturbance(StrictModel):
 Disturbance = Annotated[ForceDisturbance | JointTorqueDisturbance, Field(discriminator="type")]
 
 
+# Ranges a campaign's draws for these keys are held to as well (campaign/document.py)
+PAYLOAD_MASS = Range(0, 1e4, "kg", open=True)
+NOISE_STD = Range(0, 1e6, "Nm")
+MASS_SCALE = Range(0, 1e3, open=True)
+
+
 class Payload(StrictModel):
     """A mass the controller does not know about, rigidly attached at a frame (simulation only)."""
 
     frame: str = Field(description="link or frame the payload is attached to", examples=["tool"])
-    mass: Annotated[Number, Range(0, 1e4, "kg", open=True)] = Field(description="mass, kg", examples=[2.0])
+    mass: Annotated[Number, PAYLOAD_MASS] = Field(description="mass, kg", examples=[2.0])
     com: Annotated[Vec3, LENGTH] = Field((0.0, 0.0, 0.0), description="centre of mass in the frame, m", examples=[[0, 0, 0.05]])
 
 
@@ -65,7 +71,7 @@ class ExternalTorqueSensing(StrictModel):
     mode: Literal["ideal", "ignored", "noisy"] = Field(
         "ideal", description="ideal: the true external torque (Nm); ignored: zero; noisy: with noise_std and bias",
         examples=["noisy"])
-    noise_std: Annotated[ScalarOrVector, Range(0, 1e6, "Nm")] = Field(0.0, description="Gaussian noise (standard deviation), Nm, one value or one "
+    noise_std: Annotated[ScalarOrVector, NOISE_STD] = Field(0.0, description="Gaussian noise (standard deviation), Nm, one value or one "
                                       "per joint", examples=[0.5])
     bias: Annotated[ScalarOrVector, TORQUE] = Field(0.0, description="constant offset, Nm, one value or one per joint", examples=[0.2])
     seed: Annotated[Integer, Range(0, 2**32 - 1)] = Field(0, description="seed of the noise generator (unitless)", examples=[0, 42])
@@ -74,7 +80,7 @@ class ExternalTorqueSensing(StrictModel):
 class ModelMismatch(StrictModel):
     """Differences between the simulated robot and the controller's model."""
 
-    mass_scale: Annotated[Number, Range(0, 1e3, open=True)] = Field(1.0, description="the controller's link masses and inertias are scaled by this "
+    mass_scale: Annotated[Number, MASS_SCALE] = Field(1.0, description="the controller's link masses and inertias are scaled by this "
                                "factor (unitless)", examples=[1.1])
 
 
