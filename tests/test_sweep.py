@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import shlex
+import shutil
 import signal
 import subprocess
 import sys
@@ -21,6 +22,7 @@ from command_line import MINIMAL, ROOT, invoke
 
 from dcts_spec.campaign import SweepOptions, load_campaign_text, sweep, tune
 from dcts_spec.campaign.engine import RayPool
+from dcts_spec.campaign.report import save_json
 from dcts_spec.campaign.runner import CampaignInputs, SampleRunner, metric_columns
 from dcts_spec.campaign.sampling import Sampler
 from dcts_spec.campaign.scenario import JointRange, sample_spec_data
@@ -172,6 +174,20 @@ def test_one_range_for_every_joint_is_checked_against_each_joints_limit(spec_fil
     result = invoke("sweep", str(spec), "--campaign", str(campaign), "-o", str(tmp_path / "out"), "--serial", "-q")
     assert result.exit_code == 1 and f"{campaign}:18:" in result.stderr, result.output
     assert "leave the allowed range (0, 1.74533] rad/s" in result.stderr and "what all its components allow" in result.stderr
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_campaign_too_large_to_list_is_refused(spec_file, tmp_path) -> None:
+    """10⁷ samples at each of 100 grid points passed (only `samples` was capped) and the run took
+    24 GB listing them before it ran one."""
+    campaign = tmp_path / "c.yaml"
+    campaign.write_text(CAMPAIGN.replace("samples: 6", "samples: 10000000").replace(
+        "duration: {choice: [0.05, 0.1]}", "duration: {grid: [0.01, 0.02, 0.03, 0.04, 0.05, 0.06, 0.07, 0.08, 0.09, 0.1]}")
+        .replace("mass: {uniform: [0.5, 2.5]}", "mass: {grid: [0.5, 1, 1.5, 2, 2.5, 3, 3.5, 4, 4.5, 5]}"))
+    result = invoke("sweep", str(spec_file), "--campaign", str(campaign), "-o", str(tmp_path / "out"), "--serial", "-q",
+                    "--max-samples", "2")
+    assert result.exit_code == 1 and f"{campaign}:2:" in result.stderr, result.output
+    assert "at each of the 100 grid points are 1,000,000,000 samples" in result.stderr
     assert not (tmp_path / "out").exists()
 
 
@@ -361,6 +377,32 @@ def test_a_changed_campaign_is_refused_at_its_file(spec_file, campaign_file, ser
     assert result.exit_code == 1
     assert result.stderr.startswith(f"{changed}:1:1: error: this campaign file changed since")
     assert len(_rows(serial_run.folder)) == 6  # nothing written
+
+
+@pytest.mark.parametrize(("line", "words"), [
+    ('{"index": 2, "seed": 1, "status": "ok"', "not a JSON object"),  # (garbled in the middle)
+    ('{"index": 99, "seed": 1, "status": "ok"}', "its index 99 is not a sample of this campaign (0 to 5)"),
+    ('{"index": 1, "seed": 1}', "its status None is none of ok, invalid, error"),
+])
+def test_a_foreign_line_in_the_samples_is_an_error_at_it(spec_file, campaign_file, serial_run, tmp_path,
+                                                         line, words) -> None:
+    """A garbled or foreign line gave an internal error (exit 3: JSONDecodeError, KeyError)."""
+    out = tmp_path / "out"
+    shutil.copytree(serial_run.folder, out)
+    rows = (out / "samples.jsonl").read_text().splitlines()
+    (out / "samples.jsonl").write_text("\n".join([*rows[:3], line, *rows[3:]]) + "\n")
+    result = invoke("sweep", str(spec_file), "--campaign", str(campaign_file), "-o", str(out), "--serial", "-q")
+    assert result.exit_code == 1, result.output
+    assert result.stderr.startswith(f"{out / 'samples.jsonl'}:4:1: error: {words}"), result.stderr
+
+
+def test_a_report_is_json_without_infinity(tmp_path) -> None:
+    """A trial scored worst possible (∞) made report.json and trials.jsonl invalid JSON."""
+    save_json({"best": {"value": float("inf")}, "history": [float("nan"), 1.0]}, tmp_path / "r.json")
+    def refuse(constant):
+        raise ValueError(constant)
+    assert json.loads((tmp_path / "r.json").read_text(), parse_constant=refuse) == {
+        "best": {"value": None}, "history": [None, 1.0]}
 
 
 def test_a_folder_dcts_did_not_write_is_refused(spec_file, campaign_file, tmp_path) -> None:

@@ -26,6 +26,7 @@ from ..spec.types import DURATION, TIME, TORQUE, FieldError, Integer, Number, Ra
 from ..spec.units import AngleUnit
 
 KINDS = ("uniform", "loguniform", "normal", "choice", "grid")
+MAX_SAMPLES = 10_000_000  # in a campaign, its grids crossed included
 
 
 def _fixed_or_distribution(value: Any) -> Any:
@@ -253,7 +254,7 @@ class Campaign(StrictModel):
     """Samples of a spec's scenario and controller, run with the spec's compiled C controller."""
 
     version: Literal[1] = Field(description="campaign language version; 1 is the only one", examples=[1])
-    samples: Annotated[Integer, Range(1, 10_000_000)] = Field(
+    samples: Annotated[Integer, Range(1, MAX_SAMPLES)] = Field(
         description="random draws (at every grid point, when there are grids)", examples=[1000])
     seed: Annotated[Integer, Range(0, 2**32 - 1)] = Field(0, description="seed of every draw", examples=[7])
     duration: Annotated[Number, DURATION] | None = Field(None, description="length of each run, s (default: the "

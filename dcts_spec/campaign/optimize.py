@@ -15,6 +15,7 @@ import math
 from pathlib import Path
 from typing import Any
 
+from ..analysis.metrics import json_ready
 from ..spec.errors import SpecError
 from .document import Distribution
 from .report import LOWER_IS_WORSE
@@ -113,7 +114,7 @@ def _ran_with(row: dict[str, Any], values: dict[str, Any]) -> bool:
 
 def _append(path: Path, record: dict[str, Any]) -> None:
     with path.open("a", encoding="utf-8") as f:
-        f.write(json.dumps(record) + "\n")
+        f.write(json.dumps(json_ready(record), allow_nan=False) + "\n")
 
 
 def tune(spec_file: str | Path, campaign_file: str | Path, out: str | Path, metric: str, objective: str = "worst",

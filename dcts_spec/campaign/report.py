@@ -17,6 +17,7 @@ from typing import Any
 
 from matplotlib.figure import Figure
 
+from ..analysis.metrics import json_ready
 from .document import ReportSettings
 from .results import REPLAYS
 
@@ -177,4 +178,5 @@ def summary_lines(report: dict[str, Any]) -> list[str]:
 
 
 def save_json(report: dict[str, Any], path: Path) -> None:
-    path.write_text(json.dumps(report, indent=2) + "\n", encoding="utf-8")
+    """JSON without NaN or Infinity (a trial scored worst possible): null there, as in the rows."""
+    path.write_text(json.dumps(json_ready(report), indent=2, allow_nan=False) + "\n", encoding="utf-8")

@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from ..files import OWNED, OutputFolderError, check_writable, install_files, owned_names, remove_stale_staging
-from ..spec.errors import Diagnostic, SpecError
+from ..spec.errors import Diagnostic, SpecError, shown
 
 STATE = "campaign.json"
 SAMPLES = "samples.jsonl"
@@ -59,9 +59,9 @@ class ResultsFolder:
             raise OutputFolderError(f"{self.folder} holds another dcts output (no {STATE}): choose another output "
                                     "folder for the campaign")
 
-    def open(self) -> dict[int, dict[str, Any]]:
+    def open(self, samples: int) -> dict[int, dict[str, Any]]:
         """Check the folder, record the campaign (or check it is the recorded one) and return
-        the rows already finished, by sample index."""
+        the rows already finished, by sample index (of the campaign's `samples`)."""
         self.check()
         state_file = self.folder / STATE
         self.folder.mkdir(parents=True, exist_ok=True)
@@ -70,7 +70,7 @@ class ResultsFolder:
         paths = recorded.get("paths", []) if isinstance(recorded, dict) else []  # (the report's files)
         owned.write_text(json.dumps({"kind": "campaign", "entries": sorted(NAMES), "paths": paths}) + "\n")
         state_file.write_text(json.dumps(self.state, indent=2) + "\n")
-        return self._finished()
+        return self._finished(samples)
 
     def _check_same(self, recorded: dict[str, Any]) -> None:
         for what in ("spec", "campaign"):
@@ -86,8 +86,9 @@ class ResultsFolder:
                 f"{self.state['settings']}): give another --out folder, or the same options",
                 file=str(self._files["campaign"]), line=1, column=1)])
 
-    def _finished(self) -> dict[int, dict[str, Any]]:
-        """The rows of samples.jsonl; a last line cut short by a kill is dropped (and cut off)."""
+    def _finished(self, samples: int) -> dict[int, dict[str, Any]]:
+        """The rows of samples.jsonl; a last line cut short by a kill is dropped (and cut off). A
+        line that is no row of this campaign (edited, or added from elsewhere) is an error at it."""
         rows: dict[int, dict[str, Any]] = {}
         path = self.samples_file
         if not path.is_file():
@@ -97,10 +98,19 @@ class ResultsFolder:
         if len(complete) != len(data):
             with path.open("r+b") as f:
                 f.truncate(len(complete))
-        for line in complete.decode().splitlines():
-            if line.strip():
+        for number, line in enumerate(complete.decode(errors="replace").splitlines(), 1):
+            if not line.strip():
+                continue
+            try:
                 row = json.loads(line)
-                rows[int(row["index"])] = row
+            except ValueError:
+                row = None
+            problem = _row_problem(row, samples)
+            if problem:
+                raise SpecError([Diagnostic(
+                    f"{problem}: not a row dcts wrote for this campaign; remove the line (its sample runs again) or "
+                    "give another --out folder", file=str(path), line=number, column=1)])
+            rows[row["index"]] = row
         return rows
 
     def append(self, rows: Iterable[dict[str, Any]]) -> None:
@@ -133,3 +143,16 @@ class ResultsFolder:
         plots = self.folder / "plots"
         return {"report.json", "report.html", *(f"plots/{p.name}" for p in plots.glob("*.png")),
                 *(f"{REPLAYS}/{p.name}" for p in (self.folder / REPLAYS).glob("sample_*.yaml"))}
+
+
+def _row_problem(row: Any, samples: int) -> str:
+    """What makes a samples.jsonl line no sample row of a campaign of `samples` ('' if nothing)."""
+    if not isinstance(row, dict):
+        return "not a JSON object"
+    index = row.get("index")
+    if isinstance(index, bool) or not isinstance(index, int) or not 0 <= index < samples:
+        return f"its index {shown(index)} is not a sample of this campaign (0 to {samples - 1})"
+    if row.get("status") not in ("ok", "invalid", "error"):
+        return f"its status {shown(row.get('status'))} is none of ok, invalid, error"
+    return ""
+

@@ -8,7 +8,6 @@ resuming and replaying rely on.
 
 from __future__ import annotations
 
-import itertools
 import math
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -72,15 +71,28 @@ class Sampler:
         formulation = campaign.controller.formulation if campaign.controller else None
         self._formulations = None if formulation is None else (formulation.choice or formulation.grid or [formulation.fixed])
         self._formulation_grid = formulation is not None and formulation.grid is not None
-        grids: list[list] = [v.distribution.grid for v in self.variables if v.distribution.grid is not None]
+        self._grids: list[list] = [v.distribution.grid for v in self.variables if v.distribution.grid is not None]
         if self._formulation_grid:
-            grids.append(list(self._formulations))
-        self.grid_points = list(itertools.product(*grids))  # [()] without grids
+            self._grids.append(list(self._formulations))
+
+    @property
+    def grid_points(self) -> int:
+        """The grids crossed: how many points (1 without grids)."""
+        return math.prod(len(g) for g in self._grids)
 
     @property
     def count(self) -> int:
         """Samples in the campaign: the draws at every grid point."""
-        return self.campaign.samples * len(self.grid_points)
+        return self.campaign.samples * self.grid_points
+
+    def _grid_point(self, k: int) -> list:
+        """The values of grid point k, in the order of itertools.product over the grids (the last
+        grid varies fastest), without listing the points (a product of large grids is huge)."""
+        point = []
+        for grid in reversed(self._grids):
+            k, r = divmod(k, len(grid))
+            point.append(grid[r])
+        return point[::-1]
 
     @property
     def formulations(self) -> list[str | None]:
@@ -96,7 +108,7 @@ class Sampler:
             raise IndexError(f"sample {index} of {self.count}")
         rng = np.random.default_rng([self.campaign.seed, index])
         seed = int(rng.integers(SEED_RANGE))
-        point = iter(self.grid_points[index // self.campaign.samples])
+        point = iter(self._grid_point(index // self.campaign.samples))
         values: dict[str, float | list[float]] = {}
         for v in self.variables:
             if v.distribution.grid is not None:

@@ -17,7 +17,7 @@ from ..codegen.loader import CompiledController
 from ..phases import phase
 from ..spec import load_spec
 from ..spec.errors import Diagnostic, SpecError, did_you_mean
-from .document import Campaign, load_campaign
+from .document import MAX_SAMPLES, Campaign, load_campaign
 from .engine import Pool, RayPool, SerialPool, Throughput, ray_session
 from .progress import sample_progress
 from .report import rates, replay_name, save_json, summarize_metrics, worst_cases, write_html, write_plots
@@ -93,7 +93,7 @@ class CampaignSession:
         check_parameters(self.driver)
         if check is not None:  # (the caller's own check of the inputs: an optimization's search space)
             check(self)
-        self.rows = self.folder.open()  # (only now: a campaign refused above leaves no folder)
+        self.rows = self.folder.open(self.driver.sampler.count)  # (only now: a refused campaign leaves no folder)
         self.pool: Pool | None = None
         self.parameters: dict[str, Any] | None = None  # the optimizer's best, for the campaign's rows
         self._stack = ExitStack()  # the Ray session, once a pool is wanted
@@ -214,6 +214,11 @@ def check_campaign(driver: SampleRunner) -> None:
     campaign, robot, spec = driver.campaign, driver.robot, driver.spec
     src = campaign.source
     diagnostics: list[Diagnostic] = []
+    sampler = driver.sampler
+    if sampler.count > MAX_SAMPLES:  # (listing the samples to run would take gigabytes)
+        diagnostics.append(src.diagnostic(("samples",), (
+            f"{campaign.samples:,} samples at each of the {sampler.grid_points:,} grid points are {sampler.count:,} "
+            f"samples; a campaign has at most {MAX_SAMPLES:,}: fewer samples or grid values")))
     frames = [f.name for f in robot.model.frames]
     for kind, key, entries in (("pushes", "body", campaign.pushes), ("payloads", "frame", campaign.payloads)):
         for i, entry in enumerate(entries):
