@@ -30,7 +30,9 @@ from .spec import Spec, SpecError, load_spec
 from .tasks import ReferenceInput
 from .validate import ValidationReport, validate_spec
 
-STATUS_OK = 0  # every torque, joint and Cartesian bound holds (checked after the solve)
+# every torque, joint and Cartesian bound holds (checked after the solve); a closed form (osc,
+# projector) has no joint or Cartesian bound rows: its torque is clipped, and nothing else checked
+STATUS_OK = 0
 # a joint/Cartesian bound is crossed: its acceleration bound violated as little as the torque
 # limits allow, or the state already beyond its position or velocity limit (after a push; the
 # bound then brings it back)
@@ -60,7 +62,9 @@ class StepResult:
     """Output of one control step."""
 
     tau: np.ndarray  # joint torques to apply (gravity included), within the torque limits
-    ddq: np.ndarray  # commanded joint acceleration M⁻¹(τ − ν − g); the actual one adds M⁻¹τ_ext
+    # commanded joint acceleration M⁻¹(τ − ν − g); the actual one adds M⁻¹τ_ext. For a law that
+    # does not bound its torque (osc, projector), of the torque before it is clipped to the limits
+    ddq: np.ndarray
     scaling: np.ndarray  # one task scaling factor per priority level, highest first, in [0, 1] (1 = not scaled)
     status: int  # STATUS_* code; negative means the fallback torque was applied
     x: np.ndarray  # the QP solution, in scaled variables (empty for closed forms)

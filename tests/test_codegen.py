@@ -318,6 +318,26 @@ def test_nonfinite_inputs_give_the_fallback(built, three_levels_spec, where):
     np.testing.assert_allclose(result.tau, expected.tau, rtol=1e-12, atol=1e-12)
 
 
+def test_a_copied_workspace_steps_as_not_initialized(built, three_levels_spec):
+    """The workspace holds pointers into itself: a memcpy of an initialized one stepped on the
+    original's memory (use after free once that was gone). It now reports -4 and the fallback."""
+    import ctypes
+
+    _, compiled = built
+    s = StateSampler(build_controller(three_levels_spec), seed=3).random()
+    compiled.reset()
+    assert compiled.step(*s.as_tuple()).ok
+    copy = compiled._storage.copy()  # (what memcpy or a struct assignment of the workspace makes)
+    saved = compiled._args
+    try:
+        compiled._args = (ctypes.c_void_p(copy.ctypes.data), *saved[1:])
+        status = compiled._call(*s.as_tuple())
+    finally:
+        compiled._args = saved
+    assert status == -4 and np.all(np.isfinite(compiled._tau))
+    assert compiled.step(*s.as_tuple()).ok  # (the original still steps)
+
+
 def test_a_reading_written_into_the_last_steps_array_keeps_the_last_finite_q(built, three_levels_spec):
     """A loop that reads its sensors into the same array every step: after a NaN reading, both
     runtimes' fallback compensates gravity at the q of the step before (the Python runtime kept a

@@ -219,6 +219,20 @@ def test_readme_integration_example_compiles(sheet, tmp_path, formulation):
     assert done.returncode == 0, done.stderr
 
 
+def test_a_closed_forms_header_does_not_promise_the_bounds(sheet, tmp_path):
+    """osc has no joint or Cartesian bound rows and clips its torque: its header said status 0
+    meant every bound held (status 0 came with a joint 0.5 rad beyond its limit) and that ddq was
+    the acceleration of the applied torque (it is that of the torque before the clip)."""
+    (tmp_path / "minimal.yaml").write_text(MINIMAL.read_text())
+    compile_bundle(tmp_path / "minimal.yaml", tmp_path / "osc", formulation="osc", build=False)
+    closed = (tmp_path / "osc" / "minimal.h").read_text()
+    assert "no joint or Cartesian bound rows: those limits are neither" in " ".join(closed.split())
+    assert "joint/Cartesian bound holds" not in closed
+    assert "M^-1 (tau - nu - g) before the torque clip" in closed
+    header = sheet[1]  # (a dcts QP with bounds: as before)
+    assert "every torque limit and joint/Cartesian bound holds" in header and "before the torque clip" not in header
+
+
 def test_prismatic_joint_in_m_and_n(tmp_path):
     """A prismatic joint's row, inputs and references are in m, m/s and N, a revolute one's in rad."""
     slider_controller(tmp_path)  # writes the URDF and the spec

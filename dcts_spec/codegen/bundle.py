@@ -539,7 +539,8 @@ def generate_sources(
         daqp_note = " (closed-form law: no QP solver)"
     values = {
         "PARAMETERS": parameters_text(controller, big),
-        "STATUS_LIST": status_text(name, big, bool(controller.ref_size)),
+        "STATUS_LIST": status_text(name, big, bool(controller.ref_size), nr, not controller.law.enforces_torque_limits),
+        "DDQ_NOTE": "" if controller.law.enforces_torque_limits else " before the torque clip",
         "CONVENTIONS": conventions_text(controller),
         "GAINS": gains_text(controller),
         "LIMITS": limits_text(controller),

@@ -345,13 +345,25 @@ def parameters_struct(controller: Controller, big: str) -> tuple[str, str]:
 # -- statuses, model, timing -----------------------------------------------------------------------
 
 
-def status_text(name: str, big: str, takes_ref: bool) -> str:
-    rows = [
-        ("0", "OK", "every torque limit and joint/Cartesian bound holds (checked after the solve)"),
-        ("1", "LIMITS_RELAXED", "a joint/Cartesian bound is crossed (those in info->relaxed): the torque"),
-        ("", "", "limits cannot hold it, and it is violated as little as they allow (tasks"),
-        ("", "", "come after); or the state is already beyond its position or velocity limit"),
-        ("", "", "(after a push), and the bound brings it back"),
+def status_text(name: str, big: str, takes_ref: bool, bound_rows: int, clips: bool) -> str:
+    """The status table; `bound_rows`: the law's joint/Cartesian bound rows (none in a closed form),
+    `clips`: its torque is clipped to the limits rather than bounded (osc, projector)."""
+    if bound_rows:
+        rows = [
+            ("0", "OK", "every torque limit and joint/Cartesian bound holds (checked after the solve)"),
+            ("1", "LIMITS_RELAXED", "a joint/Cartesian bound is crossed (those in info->relaxed): the torque"),
+            ("", "", "limits cannot hold it, and it is violated as little as they allow (tasks"),
+            ("", "", "come after); or the state is already beyond its position or velocity limit"),
+            ("", "", "(after a push), and the bound brings it back"),
+        ]
+    else:
+        rows = [
+            ("0", "OK", "the torque is within its limits" + (" (clipped to them)" if clips else "") + "; this"),
+            ("", "", "controller has no joint or Cartesian bound rows: those limits are neither"),
+            ("", "", "enforced nor checked"),
+            ("1", "LIMITS_RELAXED", "not returned by this controller (no bound rows)"),
+        ]
+    rows += [
         ("-1", "NONFINITE_INPUT", "an input was NaN or infinite" + (" (or ref NULL: the controller takes one)"
                                                                       if takes_ref else "")),
         ("-2", "SOLVER_FAILED", "the QP solver failed (also on non-finite QP data)"),

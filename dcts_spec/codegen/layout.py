@@ -100,6 +100,7 @@ def workspace_fields(nq: int, nref: int, nx: int, na: int, nlevels: int, casadi_
     daqp_doubles, daqp_ints = daqp_storage(nx, na, nr)
     return [
         ("magic", "unsigned long", 0, "set by init"),
+        ("self", "const void *", 0, "its own address, set by init: a copy (which points into the original) is not initialized"),
         ("arg", "const double *", work["arg"], "CasADi work vectors"),
         ("res", "double *", work["res"], ""),
         ("iw", "long long", work["iw"], ""),
@@ -223,7 +224,8 @@ def header_fields(fields: list[tuple[str, str, int, str]]) -> str:
 
 
 _CTYPES = {"double": ctypes.c_double, "int": ctypes.c_int, "long long": ctypes.c_longlong,
-           "unsigned long": ctypes.c_ulong, "const double *": ctypes.c_void_p, "double *": ctypes.c_void_p}
+           "unsigned long": ctypes.c_ulong, "const double *": ctypes.c_void_p, "double *": ctypes.c_void_p,
+           "const void *": ctypes.c_void_p}
 
 
 def workspace_struct(fields: list[tuple[str, str, int, str]], solver_bytes: int) -> type[ctypes.Structure]:
