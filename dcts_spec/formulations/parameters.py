@@ -51,7 +51,7 @@ class ParameterInput:
     default: tuple[float, ...]
     lower: tuple[float, ...]
     upper: tuple[float, ...]
-    lower_open: bool = False  # the value must exceed `lower` (a velocity limit, a kd that divides)
+    lower_open: bool = False  # the value must exceed `lower` (a velocity limit)
 
     def to_dict(self) -> dict:
         return {"name": self.name, "c_name": self.c_name, "offset": self.offset, "size": self.size, "unit": self.unit,
@@ -250,8 +250,7 @@ def _task_parameters(b: _Builder, task: Task, fields: tuple[str, ...]) -> tuple[
         if gain in fields:
             lo, hi, unit = GAIN_RANGES[gain]
             default = getattr(task, gain)
-            open_ = gain == "kd" and task.max_velocity is not None  # kp/kd divides by it
-            setattr(values, gain, b.take(f"{task.name}.{gain}", unit, axes, default, [lo] * m, [hi] * m, open_))
+            setattr(values, gain, b.take(f"{task.name}.{gain}", unit, axes, default, [lo] * m, [hi] * m))
     if "max_velocity" in fields:
         lo, hi = MAX_VELOCITY_RANGE
         values.max_velocity = b.take(f"{task.name}.max_velocity", unit_text(task.row_units, "/s"), ("norm",),

@@ -10,6 +10,9 @@ import numpy as np
 
 from ..symbolic import SymbolicRobot
 
+# The smallest kd (1/s) the velocity-saturated law divides kp by (`Task._feedback`)
+SATURATION_KD_FLOOR = 1e-9
+
 
 def unit_text(units: tuple[str, ...], suffix: str = "") -> str:
     """The distinct units of some rows, in order: "m/s", or "m/s, rad/s" for a mix."""
@@ -148,7 +151,9 @@ class Task(ABC):
         if self.max_velocity is None:
             return kp * error - kd * velocity_error
         max_velocity = self.max_velocity if params.max_velocity is None else params.max_velocity
-        desired_velocity = (kp / kd) * error
+        # (kd floored where it divides: a kd of 0, or a denormal one set at run time, made kp/kd
+        # infinite and every step fall back; below the floor the law is ẍ_d ≈ 0 either way)
+        desired_velocity = (kp / ca.fmax(kd, SATURATION_KD_FLOOR)) * error
         speed = ca.norm_2(desired_velocity)
         v = ca.fmin(1.0, max_velocity / ca.fmax(speed, 1e-12))
         return -kd * (velocity_error - v * desired_velocity)
