@@ -162,12 +162,15 @@ def least_squares_step(level: Level, acceleration: ca.SX, N: ca.SX, mass: ca.SX)
 
 
 class OverConstrainedLevel(ValueError):
-    """A priority level above the lowest whose tasks conflict with the higher ones everywhere."""
+    """A priority level above the lowest whose tasks conflict with the higher ones (or, the highest
+    level, among themselves) everywhere."""
 
-    def __init__(self, priority: int):
-        super().__init__(
-            f"priority {priority} is over-constrained: its tasks conflict with the higher priorities at every "
-            "configuration tried; only the lowest priority level may ask for more than the freedom left")
+    def __init__(self, priority: int, highest: bool = False):
+        why = ("its task rows are dependent, or ask for a direction no joint moves (a frame no joint moves, "
+               "tasks sharing rows), at every configuration tried" if highest else
+               "its tasks conflict with the higher priorities at every configuration tried")
+        super().__init__(f"priority {priority} is over-constrained: {why}; only the lowest priority level may ask "
+                         "for more than the freedom left")
         self.priority = priority
 
 
@@ -211,6 +214,6 @@ def level_structure(problem: ControlProblem) -> LevelStructure:
             N = N - Jbar @ Jr
     bad = [i for i in range(len(levels) - 1) if deficient[i]]
     if bad:
-        raise OverConstrainedLevel(levels[bad[0]].priority)
+        raise OverConstrainedLevel(levels[bad[0]].priority, highest=bad[0] == 0)
     exact = len(levels) - 1 if deficient[-1] else len(levels)
     return LevelStructure(exact, bool(deficient[-1]), problem.n - sum(lv.dim for lv in levels[:exact]))
