@@ -7,6 +7,7 @@ module (2 CPUs, no dashboard), to stay within the suite's time."""
 from __future__ import annotations
 
 import json
+import os
 import shlex
 import shutil
 import signal
@@ -312,13 +313,17 @@ def test_an_interrupted_campaign_resumes_where_it_stopped(spec_file, campaign_fi
     assert all(_without_timing(rows[i]) == _without_timing(reference[i]) for i in rows)
 
 
-def test_a_killed_campaign_resumes(spec_file, tmp_path) -> None:
-    """SIGTERM in the middle of a campaign (a cluster job's end): the finished samples stay, and the
-    same command runs the others only."""
+@pytest.mark.parametrize("engine", ["serial", pytest.param("ray", marks=pytest.mark.skipif(
+    not os.environ.get("DCTS_SLOW"), reason="a Ray session in a subprocess (~15 s): set DCTS_SLOW=1 to run it"))])
+def test_a_killed_campaign_resumes(spec_file, tmp_path, engine) -> None:
+    """SIGTERM in the middle of a campaign (a cluster job's end): the finished samples stay, the
+    command exits with 143, and the same command runs the others only. (With Ray, its core
+    worker's own handler dumped a stack trace and exited with 15.)"""
     campaign_file = tmp_path / "campaign.yaml"
     campaign_file.write_text(CAMPAIGN.replace("samples: 6", "samples: 30"))
     out = tmp_path / "out"
-    args = ["sweep", str(spec_file), "--campaign", str(campaign_file), "-o", str(out), "--serial", "--no-plots", "-q"]
+    args = ["sweep", str(spec_file), "--campaign", str(campaign_file), "-o", str(out), "--no-plots", "-q"]
+    args += ["--serial"] if engine == "serial" else ["--workers", "1"]
     script = Path(sys.executable).with_name("dcts")
     process = subprocess.Popen([str(script), *args], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     samples = out / "samples.jsonl"
@@ -403,6 +408,14 @@ def test_a_report_is_json_without_infinity(tmp_path) -> None:
         raise ValueError(constant)
     assert json.loads((tmp_path / "r.json").read_text(), parse_constant=refuse) == {
         "best": {"value": None}, "history": [None, 1.0]}
+
+
+def test_an_unreachable_cluster_is_an_error_at_once(spec_file, campaign_file, tmp_path) -> None:
+    """Ray retried for minutes, printing only its own log lines, and left the folder behind."""
+    result = invoke("sweep", str(spec_file), "--campaign", str(campaign_file), "-o", str(tmp_path / "out"),
+                    "--address", "127.0.0.1:1", "-q")
+    assert result.exit_code == 1 and "--address 127.0.0.1:1: no Ray cluster answers there" in result.stderr
+    assert not (tmp_path / "out").exists()
 
 
 def test_a_folder_dcts_did_not_write_is_refused(spec_file, campaign_file, tmp_path) -> None:

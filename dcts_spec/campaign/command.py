@@ -13,6 +13,7 @@ from ..codegen import CodegenError
 from ..files import OutputFolderError
 from ..sim.runtime import RuntimeUnavailable
 from ..spec import SpecError
+from .engine import ClusterUnreachable
 from .optimize import tune
 from .report import summary_lines
 from .results import SAMPLES
@@ -50,7 +51,7 @@ def sweep_command(c: SweepCommand) -> int:
     except UnknownMetric as error:
         typer.echo(f"error: {error}", err=True)
         return 2
-    except (OutputFolderError, RuntimeUnavailable, CodegenError) as error:
+    except (OutputFolderError, RuntimeUnavailable, CodegenError, ClusterUnreachable) as error:
         typer.echo(f"error: {error}", err=True)
         return 1
     except ModuleNotFoundError as error:
@@ -61,8 +62,9 @@ def sweep_command(c: SweepCommand) -> int:
                                                                       else ""), err=True)
         return 1
     except KeyboardInterrupt:
-        typer.echo(f"interrupted: the finished samples are in {c.out / SAMPLES}; run the same command to resume",
-                   err=True)
+        kept = f"the finished samples are in {c.out / SAMPLES}" if (c.out / SAMPLES).is_file() else \
+            "no sample had finished"
+        typer.echo(f"interrupted: {kept}; run the same command to resume", err=True)
         return INTERRUPTED
     if not c.quiet:
         typer.echo("\n".join(summary_lines(result.report)))

@@ -8,6 +8,9 @@ SampleRunner that keeps its loaded spec and bundles between samples.
 from __future__ import annotations
 
 import os
+import signal
+import socket
+import threading
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -138,6 +141,25 @@ class RayPool:
             ray.kill(actor)
 
 
+class ClusterUnreachable(RuntimeError):
+    """No Ray cluster answers at the address given."""
+
+
+def check_address(address: str, timeout: float = 5.0) -> None:
+    """Raise ClusterUnreachable unless something listens at a Ray cluster's host:port (`auto`:
+    Ray finds it). Ray itself retries for minutes, saying nothing but its own log lines."""
+    if address == "auto":
+        return
+    host, _, port = address.removeprefix("ray://").rpartition(":")
+    if not host or not port.isdigit():
+        raise ClusterUnreachable(f"--address {address!r}: expected host:port, ray://host:port or auto")
+    try:
+        socket.create_connection((host.strip("[]"), int(port)), timeout=timeout).close()
+    except OSError as error:
+        raise ClusterUnreachable(f"--address {address}: no Ray cluster answers there ({error.strerror or error}); "
+                                 "start one (ray start --head) or leave --address out for a local session") from None
+
+
 @contextmanager
 def ray_session(address: str | None = None, cpus: int | None = None) -> Iterator[None]:
     """Ray on this machine (no setup: a local session started and stopped here), or the cluster at
@@ -150,7 +172,14 @@ def ray_session(address: str | None = None, cpus: int | None = None) -> Iterator
     options: dict[str, Any] = {"include_dashboard": False, "log_to_driver": False, "configure_logging": False}
     if address is None:
         options["num_cpus"] = cpus or os.cpu_count() or 1
+    handlers = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
     ray.init(address=address, **options)
+    # Ray's core worker installs its own signal handlers: on SIGTERM it dumped a stack trace and
+    # exited with 15, where the command stops cleanly (its samples kept) and exits with 143
+    if threading.current_thread() is threading.main_thread():
+        for s, handler in handlers.items():
+            if handler is not None:
+                signal.signal(s, handler)
     try:
         yield
     finally:

@@ -18,7 +18,7 @@ from ..phases import phase
 from ..spec import load_spec
 from ..spec.errors import Diagnostic, SpecError, did_you_mean
 from .document import MAX_SAMPLES, Campaign, load_campaign
-from .engine import Pool, RayPool, SerialPool, Throughput, ray_session
+from .engine import Pool, RayPool, SerialPool, Throughput, check_address, ray_session
 from .progress import sample_progress
 from .report import rates, replay_name, save_json, summarize_metrics, worst_cases, write_html, write_plots
 from .results import REPLAYS, ResultsFolder
@@ -87,6 +87,8 @@ class CampaignSession:
             raise UnknownMetric(f"--optimize: unknown metric {metric!r}{did_you_mean(metric, allowed)}; allowed: "
                                 f"{', '.join(allowed)}")
         self.folder.check()
+        if options.engine == "ray" and options.address:  # (before anything is built or written)
+            check_address(options.address)
         phase(f"building the C controller{'s' if len(self._bundles()) > 1 else ''} (once)")
         for formulation, mass_scale in self._bundles():
             self.driver.bundle(formulation, mass_scale)
