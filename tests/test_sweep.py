@@ -23,7 +23,7 @@ from command_line import MINIMAL, ROOT, invoke
 
 from dcts_spec.campaign import SweepOptions, load_campaign_text, sweep, tune
 from dcts_spec.campaign.engine import RayPool
-from dcts_spec.campaign.report import save_json
+from dcts_spec.campaign.report import save_json, worst_cases
 from dcts_spec.campaign.runner import CampaignInputs, SampleRunner, metric_columns
 from dcts_spec.campaign.sampling import Sampler
 from dcts_spec.campaign.scenario import JointRange, sample_spec_data
@@ -139,6 +139,20 @@ def test_a_draw_the_spec_would_refuse_is_an_error_in_the_campaign(old, new, line
         load_campaign_text(CAMPAIGN.replace(old, new), "c.yaml")
     messages = [str(d) for d in caught.value.diagnostics]
     assert any(m.startswith(f"c.yaml:{line}:") and words in m for m in messages), messages
+
+
+def test_an_empty_campaign_file_is_called_one() -> None:
+    for text, words in (("", "a campaign file is a mapping with at least `version` and `samples`"),
+                        ("- 1\n", "a campaign file must be a mapping of keys (version, samples, ...)")):
+        with pytest.raises(SpecError) as caught:
+            load_campaign_text(text, "c.yaml")
+        assert words in str(caught.value), str(caught.value)
+
+
+def test_a_violation_within_the_tolerance_is_no_worst_case() -> None:
+    rows = [{"index": i, "status": "ok", "max_torque_violation": v} for i, v in enumerate((0.0, 1.5e-9, 2e-6))]
+    assert [r["index"] for r in worst_cases(rows, "max_torque_violation", 3, 1e-6)] == [2]
+    assert [r["index"] for r in worst_cases(rows, "max_torque_violation", 3, 0.0)] == [2, 1]
 
 
 def test_campaign_names_checked_against_the_spec(spec_file, tmp_path) -> None:

@@ -26,6 +26,7 @@ from ..spec.types import DURATION, TIME, TORQUE, FieldError, Integer, Number, Ra
 from ..spec.units import AngleUnit
 
 KINDS = ("uniform", "loguniform", "normal", "choice", "grid")
+CAMPAIGN_DOCUMENT = ("campaign file", ("version", "samples"))  # (for read_yaml's messages)
 MAX_SAMPLES = 10_000_000  # in a campaign, its grids crossed included
 
 
@@ -276,11 +277,11 @@ class Campaign(StrictModel):
 
 def load_campaign(path: str | Path) -> Campaign:
     """Read a campaign file; a SpecError locates every problem."""
-    return _campaign(*read_yaml_file(path))
+    return _campaign(*read_yaml_file(path, CAMPAIGN_DOCUMENT))
 
 
 def load_campaign_text(text: str, file: str = "<campaign>") -> Campaign:
-    return _campaign(*read_yaml(text, file))
+    return _campaign(*read_yaml(text, file, CAMPAIGN_DOCUMENT))
 
 
 def _campaign(data: Any, source: SourceMap) -> Campaign:

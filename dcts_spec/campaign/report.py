@@ -52,11 +52,12 @@ def rates(rows: list[dict[str, Any]], settings: ReportSettings) -> dict[str, Any
     return out
 
 
-def worst_cases(rows: list[dict[str, Any]], metric: str, count: int) -> list[dict[str, Any]]:
+def worst_cases(rows: list[dict[str, Any]], metric: str, count: int, tolerance: float) -> list[dict[str, Any]]:
     """The `count` samples with the worst value of `metric` (highest; lowest for a scaling or a
-    rate), among those that ran and have it."""
+    rate), among those that ran and have it; a violation only beyond `tolerance` (the report's
+    violation_tolerance: one within it is no violation in the rates either)."""
     have = [r for r in rows if r["status"] == "ok" and r.get(metric) is not None
-            and not (metric in VIOLATIONS and r[metric] <= 0)]  # a bound that held is no worst case
+            and not (metric in VIOLATIONS and r[metric] <= tolerance)]  # a bound that held is no worst case
     return sorted(have, key=lambda r: (r[metric] if metric in LOWER_IS_WORSE else -r[metric], r["index"]))[:count]
 
 

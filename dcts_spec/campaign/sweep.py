@@ -155,7 +155,7 @@ class CampaignSession:
             (staging / REPLAYS).mkdir()
             worst = []
             for metric in settings.metrics:
-                for row in worst_cases(rows, metric, settings.worst):
+                for row in worst_cases(rows, metric, settings.worst, settings.violation_tolerance):
                     worst.append(self._replay(metric, row, staging))
             plots = write_plots(rows, self.driver.sampler.swept(), list(settings.metrics), staging) \
                 if self.options.plots else []

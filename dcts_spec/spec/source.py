@@ -90,8 +90,13 @@ def _scalar(node: yaml.ScalarNode, source: SourceMap, errors: list[Diagnostic]) 
         return None
 
 
-def read_yaml(text: str, file: str) -> tuple[Any, SourceMap]:
-    """Parse YAML text into plain data and a source map; syntax errors become located diagnostics."""
+# What a document is, for the messages about a file that holds none: its name and required keys
+SPEC_DOCUMENT = ("spec", ("version", "name", "robot", "tasks"))
+
+
+def read_yaml(text: str, file: str, document: tuple[str, tuple[str, ...]] = SPEC_DOCUMENT) -> tuple[Any, SourceMap]:
+    """Parse YAML text into plain data and a source map; syntax errors become located diagnostics.
+    `document`: what the file should hold (a spec, a campaign file), for the message when it does not."""
     source = SourceMap(file)
     try:
         node = compose(text)
@@ -115,22 +120,23 @@ def read_yaml(text: str, file: str) -> tuple[Any, SourceMap]:
         raise SpecError([Diagnostic(message, "error", file, line, column)]) from None
     except yaml.YAMLError as exc:
         raise SpecError([Diagnostic(f"invalid YAML: {exc}", "error", file, 1, 1)]) from None
+    name, keys = document
     if node is None:
-        raise SpecError(
-            [Diagnostic("the file is empty; a spec is a mapping with at least `version`, `name`, `robot` and `tasks`", "error", file, 1, 1)]
-        )
+        required = ", ".join(f"`{k}`" for k in keys[:-1]) + f" and `{keys[-1]}`"
+        raise SpecError([Diagnostic(f"the file is empty; a {name} is a mapping with at least {required}", "error",
+                                    file, 1, 1)])
     errors: list[Diagnostic] = []
     data = _construct(node, (), source, errors)
     if errors:
         raise SpecError(errors)
     if not isinstance(data, dict):
         kind = "a list" if isinstance(data, list) else f"the value {shown(data)}"
-        message = f"a spec must be a mapping of keys (version, name, robot, tasks, ...), but the file holds {kind}"
+        message = f"a {name} must be a mapping of keys ({', '.join(keys)}, ...), but the file holds {kind}"
         raise SpecError([source.diagnostic((), message)])
     return data, source
 
 
-def read_yaml_file(path: str | Path) -> tuple[Any, SourceMap]:
+def read_yaml_file(path: str | Path, document: tuple[str, tuple[str, ...]] = SPEC_DOCUMENT) -> tuple[Any, SourceMap]:
     """Read a YAML file of at most MAX_BYTES; a missing, unreadable or too big file is a located diagnostic too."""
     path = Path(path)
     try:
@@ -141,7 +147,7 @@ def read_yaml_file(path: str | Path) -> tuple[Any, SourceMap]:
     except OSError as exc:
         raise SpecError([Diagnostic(f"cannot read the file: {exc.strerror or exc}", "error", str(path))]) from None
     if len(raw) > MAX_BYTES:
-        message = f"the file is larger than {MAX_BYTES // 1000} kB; a spec is a few kB of YAML"
+        message = f"the file is larger than {MAX_BYTES // 1000} kB; a {document[0]} is a few kB of YAML"
         raise SpecError([Diagnostic(message, "error", str(path), 1, 1)])
     try:
         text = raw.decode("utf-8")
@@ -150,4 +156,4 @@ def read_yaml_file(path: str | Path) -> tuple[Any, SourceMap]:
         column = exc.start - raw.rfind(b"\n", 0, exc.start)
         message = f"cannot read the file: byte 0x{raw[exc.start]:02x} is not UTF-8 text"
         raise SpecError([Diagnostic(message, "error", str(path), line, column)]) from None
-    return read_yaml(text, str(path))
+    return read_yaml(text, str(path), document)
