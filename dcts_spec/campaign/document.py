@@ -88,7 +88,8 @@ _LIST = {"type": "array", "items": {"type": "number"}, "minItems": 1}
 # What an editor should accept: a number, or a mapping with one distribution.
 VALUE_SCHEMA = {"anyOf": [{"type": "number"}, {
     "type": "object", "minProperties": 1, "maxProperties": 1, "additionalProperties": False,
-    "properties": {"uniform": _PAIR, "loguniform": _PAIR, "normal": _PAIR, "choice": _LIST, "grid": _LIST}}],
+    "properties": {"fixed": {"type": "number"}, "uniform": _PAIR, "loguniform": _PAIR, "normal": _PAIR,
+                   "choice": _LIST, "grid": _LIST}}],
     "description": "a number, or one of {uniform: [low, high]}, {loguniform: [low, high]}, {normal: [mean, std]}, "
                    "{choice: [...]}, {grid: [...]}"}
 Value = Annotated[Distribution, BeforeValidator(_fixed_or_distribution), WithJsonSchema(VALUE_SCHEMA)]
