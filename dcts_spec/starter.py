@@ -14,17 +14,23 @@ import pinocchio as pin
 from .codegen.bundle import render
 from .robot.builtin import BUILTIN_ROBOTS
 from .robot.describe import RobotDescription, describe
+from .robot.model import Robot
 from .robot.resolve import resolve_robot
 from .spec import load_spec_text
 from .validate import initial_configuration
 
 # Ready postures (deg): elbow and wrist bent, away from the joint limits and from singularities
-# (a stretched arm loses a Cartesian direction). A URDF starts in the middle of its joint ranges.
+# (a stretched arm loses a Cartesian direction). A URDF starts in the middle of its joint ranges
+# if the tool can move along every axis there, else at the best-conditioned of some draws around it
+# (the middle of the iiwa14's ranges is the arm straight up: singular, and the tool was not held).
 READY_POSTURES = {
     "iiwa14": [0, 30, 0, -60, 0, 60, 0],
     "panda": [0, -45, 0, -135, 0, 90, 45],
 }
 TARGET_OFFSET = np.array([0.0, 0.1, 0.0])  # m: the tool's target, from where it starts
+WELL_CONDITIONED = 0.2  # smallest / largest singular value of the tool's position Jacobian
+POSTURE_DRAWS = 256  # seeded: the same URDF always gives the same spec
+POSTURE_SPREAD = 0.35  # draws within ± this fraction of each joint's range (± 2 rad without one)
 
 
 class InitError(Exception):
@@ -77,18 +83,40 @@ def starter_text(file: Path, robot: str) -> str:
         "TARGET": "[0, 0, 0]",
     }
     template = resources.files(__package__).joinpath("templates", "spec.yaml.in").read_text(encoding="utf-8")
-    draft = render(template, values)
-    values["TARGET"] = _flow(np.round(_tool_position(draft, file, description) + TARGET_OFFSET, 3))
+    spec = load_spec_text(render(template, values), str(file))
+    robot, _ = resolve_robot(spec)
+    if robot.nv < 3:
+        raise InitError(f"the starter spec holds the tool at a point, which takes at least 3 joints; {description.name} "
+                        f"has {robot.nv}: write the tasks by hand (docs/tasks.md)")
+    frame = robot.model.getFrameId(description.tool_frame)
+    q = initial_configuration(spec, robot)
+    if not builtin:
+        q = np.round(_well_conditioned(robot, frame, q), 3)
+        values["INITIAL_Q"] = _flow(q)
+    data = robot.model.createData()
+    pin.framesForwardKinematics(robot.model, data, q)
+    values["TARGET"] = _flow(np.round(data.oMf[frame].translation + TARGET_OFFSET, 3))
     return render(template, values)
 
 
-def _tool_position(draft: str, file: Path, description: RobotDescription) -> np.ndarray:
-    """Where the tool frame starts: forward kinematics of the draft spec's robot at initial_q."""
-    spec = load_spec_text(draft, str(file))
-    robot, _ = resolve_robot(spec)
-    data = robot.model.createData()
-    pin.framesForwardKinematics(robot.model, data, initial_configuration(spec, robot))
-    return data.oMf[robot.model.getFrameId(description.tool_frame)].translation.copy()
+def _well_conditioned(robot: Robot, frame: int, q: np.ndarray) -> np.ndarray:
+    """`q` if the tool can move along every axis there (its position Jacobian's singular values
+    within WELL_CONDITIONED of each other), else the best-conditioned of POSTURE_DRAWS seeded draws
+    around it within the joint limits."""
+    model, data = robot.model, robot.model.createData()
+
+    def conditioning(q: np.ndarray) -> float:
+        J = pin.computeFrameJacobian(model, data, q, frame, pin.LOCAL_WORLD_ALIGNED)[:3]
+        sigma = np.linalg.svd(J, compute_uv=False)
+        return float(sigma[-1] / sigma[0]) if sigma[0] > 0 else 0.0
+
+    if conditioning(q) >= WELL_CONDITIONED:
+        return q
+    lim = robot.limits
+    reach = np.where(np.isfinite(lim.q_max - lim.q_min), POSTURE_SPREAD * (lim.q_max - lim.q_min), 2.0)
+    low, high = np.maximum(q - reach, lim.q_min), np.minimum(q + reach, lim.q_max)
+    draws = np.random.default_rng(0).uniform(low, high, (POSTURE_DRAWS, q.size))
+    return max(draws, key=conditioning)
 
 
 def _torque_limits(description: RobotDescription) -> str:

@@ -113,7 +113,24 @@ def test_init_from_a_urdf_names_it_relative_to_the_spec(tmp_path: Path) -> None:
     spec.parent.mkdir()
     assert invoke("init", str(spec), "--robot", str(urdf)).exit_code == 0
     assert "urdf: ../robots/arm.urdf" in spec.read_text()
-    assert invoke("validate", str(spec)).exit_code == 0
+    # It starts where the tool moves along every axis: the middle of the iiwa14's ranges is the arm
+    # straight up, singular, and that spec was validated with warnings and never held the tool.
+    validated = invoke("validate", "--json", str(spec))
+    assert validated.exit_code == 0, validated.output
+    [report] = json.loads(validated.stdout)
+    assert not [d for d in report["diagnostics"] if d["severity"] != "info"], report["diagnostics"]
+
+
+def test_init_refuses_a_robot_that_cannot_hold_a_point(tmp_path: Path) -> None:
+    urdf = tmp_path / "pendulum.urdf"
+    link = '<inertial><mass value="1"/><origin xyz="0 0 -0.5"/><inertia ixx="0.01" iyy="0.01" izz="0.01" ixy="0" ixz="0" iyz="0"/></inertial>'
+    urdf.write_text(f'''<robot name="pendulum"><link name="base"/><link name="a">{link}</link><link name="b">{link}</link>
+<joint name="j1" type="revolute"><parent link="base"/><child link="a"/><axis xyz="0 1 0"/><limit lower="-3" upper="3" velocity="5" effort="50"/></joint>
+<joint name="j2" type="revolute"><parent link="a"/><child link="b"/><origin xyz="0 0 -1"/><axis xyz="0 1 0"/><limit lower="-3" upper="3" velocity="5" effort="50"/></joint>
+</robot>''')
+    result = invoke("init", str(tmp_path / "p.yaml"), "--robot", str(urdf))
+    assert result.exit_code == 1 and "takes at least 3 joints; pendulum has 2" in result.output, result.output
+    assert not (tmp_path / "p.yaml").exists()
 
 
 def test_init_never_overwrites_a_file(tmp_path: Path) -> None:
