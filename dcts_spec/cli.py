@@ -176,8 +176,8 @@ RuntimeOption = Annotated[Runtime, typer.Option(
     help="controller in the loop: c (the generated C bundle) or python (CasADi from Python)")]
 DurationOption = Annotated[Optional[float], typer.Option(callback=_duration, help="override scenario.duration, in s")]
 CacheOption = Annotated[bool, typer.Option(
-    "--cache/--no-cache", help="c runtime: reuse the built bundle from the cache ($DCTS_CACHE_DIR or "
-    "~/.cache/dcts/bundles); --no-cache builds it afresh and leaves the cache alone")]
+    "--cache/--no-cache", help="c runtime: reuse the built bundle from the cache ($DCTS_CACHE_DIR, else "
+    "$XDG_CACHE_HOME/dcts/bundles or ~/.cache/dcts/bundles); --no-cache builds it afresh and leaves the cache alone")]
 JsonOption = Annotated[bool, typer.Option("--json", help="machine-readable output")]
 QuietOption = Annotated[bool, typer.Option("--quiet", "-q", help="no progress messages on stderr")]
 BuildTimeoutOption = Annotated[Optional[float], typer.Option(
@@ -274,7 +274,8 @@ def simulate(
     duration: DurationOption = None,
     plots: Annotated[bool, typer.Option("--plots/--no-plots", help="write the PNG plots")] = True,
     viewer: Annotated[bool, typer.Option("--viewer", help="watch the run in MuJoCo's viewer (needs a display)")] = False,
-    video: Annotated[Optional[Path], typer.Option(parser=_path, metavar="PATH", help="render the run offscreen to this MP4 file")] = None,
+    video: Annotated[Optional[Path], typer.Option(parser=_path, metavar="PATH", help="render the run offscreen to this MP4 file "
+                                                                 "(needs ffmpeg, or pip install imageio-ffmpeg)")] = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="no progress messages or bar, no summary")] = False,
     cache: CacheOption = True,
 ) -> None:

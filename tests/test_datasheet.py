@@ -176,7 +176,7 @@ def test_header_states_units_signs_and_timing(sheet):
     assert re.search(r"q\[7\]\s+joint positions \(rad\)", header) and re.search(r"dq\[7\]\s+joint velocities \(rad/s\)", header)
     assert "the torque the environment applies on the joints" in header
     assert "M(q) ddq + nu(q, dq) + g(q) = tau + tau_ext" in header
-    assert "`dcts bench sheet.yaml` times sheet_step" in header
+    assert "`dcts bench sheet.yaml` (or spec.yaml, its copy in" in header
     assert re.search(r"Sizes +NQ 7, NREF 14, NX \d+, NA \d+, NLEVELS 3, NR \d+, NP \d+; workspace \d+ bytes", header)
 
 

@@ -74,5 +74,8 @@ def sweep_command(c: SweepCommand) -> int:
                        f"({result.report['optimize']['objective']} {c.optimize} = {best['value']:.4g})")
         state = "" if result.complete else f" ({result.report['finished']} of {result.report['samples']} samples: " \
                                           "run the same command to go on)"
-        typer.echo(f"wrote {c.out}/ (samples.jsonl, report.json, report.html, plots/, replays/){state}")
+        written = [name for name in ("samples.jsonl", "report.json", "report.html", "trials.jsonl")
+                   if (c.out / name).is_file()]
+        written += [f"{name}/" for name, what in (("plots", "plots"), ("replays", "worst_cases")) if result.report[what]]
+        typer.echo(f"wrote {c.out}/ ({', '.join(written)}){state}")
     return 0

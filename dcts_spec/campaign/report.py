@@ -145,7 +145,7 @@ def write_html(report: dict[str, Any], plots: list[str], path: Path) -> None:
 td,th{{border:1px solid #ccc;padding:.3em .6em;text-align:left}} img{{max-width:100%}}</style></head>
 <body><h1>{e(report['title'])}</h1>
 <p>{r['samples']} samples: {r['ran']} ran, {r['invalid']} invalid, {r['errors']} errors.
-Engine: {e(t['engine'])} ({t['workers']} workers), {_g(t['samples_per_second'])} samples/s this run.</p>
+Engine: {e(t['engine'])} ({workers(t['workers'])}), {_g(t['samples_per_second'])} samples/s this run.</p>
 {tuned}
 <h2>Rates (of the samples that ran)</h2><table><tr><th>samples with</th><th>count</th><th>rate</th></tr>{rate_rows}</table>
 <h2>Metrics</h2><table><tr><th>metric</th><th>mean</th><th>worst</th></tr>{metric_rows}</table>
@@ -154,6 +154,10 @@ Engine: {e(t['engine'])} ({t['workers']} workers), {_g(t['samples_per_second'])}
 <h2>Metrics against the swept values</h2>{images}
 </body></html>
 """, encoding="utf-8")
+
+
+def workers(count: int) -> str:
+    return f"{count} worker{'' if count == 1 else 's'}"
 
 
 def _percent(rate: float | None) -> str:
@@ -171,7 +175,7 @@ def summary_lines(report: dict[str, Any]) -> list[str]:
              f"{r['invalid']} invalid, {r['errors']} errors)"]
     lines += [f"  {name:<14} {v['samples']:>6}  {_percent(v['rate'])}" for name, v in r.items() if isinstance(v, dict)]
     if t["samples"]:
-        lines.append(f"  {t['engine']} engine, {t['workers']} workers: {t['samples']} samples in {t['seconds']:.1f} s, "
+        lines.append(f"  {t['engine']} engine, {workers(t['workers'])}: {t['samples']} samples in {t['seconds']:.1f} s, "
                      f"{t['samples_per_second']:.2f} samples/s (startup {t['startup_seconds']:.1f} s)")
     for w in report["worst_cases"][:5]:
         lines.append(f"  worst {w['metric']} = {w['value']:.4g} (sample {w['index']}): {w['command']}")

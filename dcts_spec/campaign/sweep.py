@@ -20,7 +20,7 @@ from ..spec.errors import Diagnostic, SpecError, did_you_mean
 from .document import MAX_SAMPLES, Campaign, load_campaign
 from .engine import Pool, RayPool, SerialPool, Throughput, check_address, ray_session
 from .progress import sample_progress
-from .report import rates, replay_name, save_json, summarize_metrics, worst_cases, write_html, write_plots
+from .report import rates, replay_name, save_json, summarize_metrics, workers, worst_cases, write_html, write_plots
 from .results import REPLAYS, ResultsFolder
 from .runner import CampaignInputs, SampleRunner
 from .scenario import replay_yaml
@@ -129,7 +129,7 @@ class CampaignSession:
         if not indices:
             return []
         pool = self.start_pool()
-        phase(f"running {len(indices)} samples on {pool.throughput.engine} ({pool.throughput.workers} workers)"
+        phase(f"running {len(indices)} samples on {pool.throughput.engine} ({workers(pool.throughput.workers)})"
               + (f" with {trial}" if trial else ""))
         out = []
         total, done = (len(indices), 0) if trial else (self.driver.sampler.count, len(self.rows))

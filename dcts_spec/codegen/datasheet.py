@@ -377,9 +377,10 @@ def status_text(name: str, big: str, takes_ref: bool, bound_rows: int, clips: bo
 
 def timing_text(name: str, spec_file: str) -> str:
     return "\n".join([
-        f" * Timing. Not measured by `dcts compile`: `dcts bench {spec_file}` times {name}_step on the",
-        " * host without Python (median, p99 and max over 10,000 closed-loop and 10,000 independent",
-        " * states), with the QP iterations and solves per step, the workspace and .text sizes.",
+        f" * Timing. Not measured by `dcts compile`: `dcts bench {spec_file}` (or spec.yaml, its copy in",
+        f" * the bundle) times {name}_step on the host without Python (median, p99 and max over 10,000",
+        " * closed-loop and 10,000 independent states), with the QP iterations and solves per step, the",
+        " * workspace and .text sizes.",
     ])
 
 
