@@ -24,6 +24,8 @@ from command_line import MINIMAL, ROOT, invoke
 from dcts_spec.campaign import SweepOptions, load_campaign_text, sweep, tune
 from dcts_spec.campaign.engine import RayPool
 from dcts_spec.campaign.report import save_json, worst_cases
+from dcts_spec.campaign.results import NAMES
+from dcts_spec.files import OWNED
 from dcts_spec.campaign.runner import CampaignInputs, SampleRunner, metric_columns
 from dcts_spec.campaign.sampling import Sampler
 from dcts_spec.campaign.scenario import JointRange, sample_spec_data
@@ -128,7 +130,7 @@ def test_campaign_errors_are_located_and_say_what_is_allowed() -> None:
 
 @pytest.mark.parametrize(("old", "new", "line", "words"), [
     ("noise_std: {uniform: [0, 0.5]}", "noise_std: {uniform: [-1, 0.5]}", 14, "values from -1 to 0.5: must be ≥ 0"),
-    ("noise_std: {uniform: [0, 0.5]}", "noise_std: {normal: [0, 0.5]}", 14, "a normal draw can fall below 0"),
+    ("noise_std: {uniform: [0, 0.5]}", "noise_std: {normal: [0.5, 0.1]}", 14, "values from -0.1 to 1.1 (mean ± 6 σ)"),
     ("mass: {uniform: [0.5, 2.5]}", "mass: {choice: [0, 1]}", 13, "values from 0 to 1: must be > 0 and ≤ 1e4 kg"),
     ("duration: {choice: [0.05, 0.1]}", "duration: -0.1", 10, "values -0.1: must be > 0"),
 ])
@@ -139,6 +141,12 @@ def test_a_draw_the_spec_would_refuse_is_an_error_in_the_campaign(old, new, line
         load_campaign_text(CAMPAIGN.replace(old, new), "c.yaml")
     messages = [str(d) for d in caught.value.diagnostics]
     assert any(m.startswith(f"c.yaml:{line}:") and words in m for m in messages), messages
+
+
+def test_a_normal_draw_well_within_the_range_is_taken() -> None:
+    """A payload of normal(2, 0.2) kg ran before the ranges were checked, and still does."""
+    campaign = load_campaign_text(CAMPAIGN.replace("mass: {uniform: [0.5, 2.5]}", "mass: {normal: [2, 0.2]}"))
+    assert campaign.payloads[0].mass.normal == (2, 0.2)
 
 
 def test_an_empty_campaign_file_is_called_one() -> None:
@@ -459,6 +467,17 @@ def test_a_campaigns_folder_keeps_its_samples_and_the_users_files(spec_file, cam
     assert (out / "replays" / "sample_mine.yaml").read_text() == "mine"
     assert {p.name for p in (out / "replays").glob("sample_0*.yaml")} == {
         Path(w["replay"]).name for w in resumed.report["worst_cases"]}  # (the earlier worst cases' replaced)
+
+
+def test_a_campaign_folder_of_an_older_dcts_resumes(spec_file, campaign_file, tmp_path) -> None:
+    """Its .dcts-owned is a plain list of names: its report files count as dcts's (the first
+    version of the report's staging refused them as a user's, and the campaign never finished)."""
+    out = tmp_path / "out"
+    options = SweepOptions(engine="serial", progress=False, max_samples=2)
+    sweep(spec_file, campaign_file, out, options)
+    (out / OWNED).write_text(json.dumps(sorted(NAMES)) + "\n")  # (as an older dcts wrote it)
+    resumed = sweep(spec_file, campaign_file, out, SweepOptions(engine="serial", progress=False))
+    assert resumed.complete and json.loads((out / "report.json").read_text())["finished"] == 6
 
 
 def test_a_worst_case_replays_with_dcts_simulate(spec_file, campaign_file, serial_run) -> None:

@@ -96,22 +96,25 @@ Value = Annotated[Distribution, BeforeValidator(_fixed_or_distribution), WithJso
 Vec3Value = tuple[Value, Value, Value]
 
 
+# A normal distribution's draws are held to mean ± this many standard deviations (one draw in 10⁹
+# falls beyond: that sample is invalid, as any draw the spec refuses)
+NORMAL_REACH = 6.0
+
+
 def within(limits: Range) -> AfterValidator:
     """A Value whose every draw the spec's key accepts (`limits`, the spec's range there), checked
     where the campaign says it: a draw outside made the sample invalid, blamed on the spec's line."""
     def check(value: Distribution) -> Distribution:
-        bounds = value.bounds
+        bounds, what = value.bounds, ""
         if bounds is None:
-            if limits.low >= 0:  # (a normal draw takes any value)
-                raise ValueError(f"a normal draw can fall below {limits.low:g}, which this value may not: use "
-                                 "uniform, loguniform, choice or grid")
-            return value
+            mean, std = value.normal
+            bounds, what = (mean - NORMAL_REACH * std, mean + NORMAL_REACH * std), f" (mean ± {NORMAL_REACH:g} σ)"
         for v in bounds:
             try:
                 limits.check(v)
             except ValueError as error:
                 shown_bounds = f"{bounds[0]:g}" if bounds[0] == bounds[1] else f"from {bounds[0]:g} to {bounds[1]:g}"
-                raise ValueError(f"values {shown_bounds}: {error}") from None
+                raise ValueError(f"values {shown_bounds}{what}: {error}") from None
         return value
     return AfterValidator(check)
 

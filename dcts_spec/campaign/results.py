@@ -67,8 +67,10 @@ class ResultsFolder:
         self.folder.mkdir(parents=True, exist_ok=True)
         owned = self.folder / OWNED
         recorded = json.loads(owned.read_text()) if owned.is_file() else {}
-        paths = recorded.get("paths", []) if isinstance(recorded, dict) else []  # (the report's files)
-        owned.write_text(json.dumps({"kind": "campaign", "entries": sorted(NAMES), "paths": paths}) + "\n")
+        state = {"kind": "campaign", "entries": sorted(NAMES)}
+        if isinstance(recorded, dict):  # (the report's files; an older dcts's list has none: see _earlier_report)
+            state["paths"] = recorded.get("paths", [])
+        owned.write_text(json.dumps(state) + "\n")
         state_file.write_text(json.dumps(self.state, indent=2) + "\n")
         return self._finished(samples)
 

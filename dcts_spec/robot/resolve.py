@@ -186,6 +186,11 @@ def _check_joint_types(model: pin.Model, src: SourceMap, diags: list[Diagnostic]
             )
 
 
+# kg·m²: a principal moment this close to 0 is rounding (iCub's URDF writes ixx = -5.4e-20 for a
+# link with no rotational inertia), not an inertia that is not positive definite
+INERTIA_ROUNDING = 1e-12
+
+
 def _check_inertias(spec: Spec, model: pin.Model, diags: list[Diagnostic]) -> None:
     """Each body's mass and rotational inertia (a joint's child link with the links fixed to it)
     must be physical. A negative mass, or an inertia that is not positive semi-definite, is an
@@ -196,12 +201,12 @@ def _check_inertias(spec: Spec, model: pin.Model, diags: list[Diagnostic]) -> No
         inertia = model.inertias[j]
         moments = np.linalg.eigvalsh(inertia.inertia)
         link = _child_link(model, j)
-        scale = max(1e-12, float(np.abs(moments).max()))
+        tolerance = max(1e-9 * float(np.abs(moments).max()), INERTIA_ROUNDING)
         if inertia.mass < 0:
             problem = f"has a negative mass ({inertia.mass:.4g} kg)"
-        elif moments[0] < -1e-9 * scale:
+        elif moments[0] < -tolerance:
             problem = f"has an inertia that is not positive definite (principal moments {_moments(moments)} kg·m²)"
-        elif moments[0] + moments[1] < moments[2] - 1e-9 * scale:
+        elif moments[0] + moments[1] < moments[2] - tolerance:
             diags.append(spec.source.diagnostic(_robot_key(spec), (
                 f"link {link}'s principal moments of inertia {_moments(moments)} kg·m² break A + B ≥ C, which every "
                 "rigid body's satisfy: the simulation (MuJoCo) balances them, the controller uses the URDF's"),

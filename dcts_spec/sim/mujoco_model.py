@@ -21,8 +21,11 @@ from ..robot.collision import CollisionModel, Shape
 # MuJoCo rejects moving bodies whose mass or principal inertia is below mjMINVAL (1e-15),
 # and a `fullinertia` that is not positive definite. Such bodies (massless intermediate
 # links, point masses) get this much mass and isotropic inertia added: safely above
-# mjMINVAL, and a relative change of the mass matrix of ~1e-14 for unit link lengths.
-_INERTIA_EPS = 1e-14
+# mjMINVAL, and a relative change of the mass matrix of ~1e-14 (~1e-12) for unit link lengths.
+# The inertia's floor is higher: MuJoCo's eigen decomposition of a `fullinertia` refused a point
+# mass given 1e-14 (iCub's URDF writes ixx = -5.4e-20 for one).
+_MASS_EPS = 1e-14
+_INERTIA_EPS = 1e-12
 
 _CAPSULE_RADIUS = 0.03
 _CAPSULE_RGBA = (0.7, 0.7, 0.7, 1.0)
@@ -219,7 +222,7 @@ def _set_inertial(body: mujoco.MjsBody, inertia: pin.Inertia) -> None:
     rot = inertia.inertia
     if np.linalg.eigvalsh(rot)[0] < _INERTIA_EPS:
         rot = rot + _INERTIA_EPS * np.eye(3)
-    body.mass = max(inertia.mass, _INERTIA_EPS)
+    body.mass = max(inertia.mass, _MASS_EPS)
     body.ipos = inertia.lever
     body.fullinertia = [rot[0, 0], rot[1, 1], rot[2, 2], rot[0, 1], rot[0, 2], rot[1, 2]]
     body.explicitinertial = True
