@@ -157,6 +157,18 @@ def test_header_lists_cartesian_bounds_with_frame_direction_and_offsets(sheet):
     assert "normal [0, 0, 2] in frame table" in header
 
 
+def test_an_axis_given_in_a_frame_is_that_frames_axis(tmp_path):
+    """`axis: z, expressed_in: table` ignored the frame (the bound held z ≥ 0.1 in the world, not
+    above the table), and the header's note on it crashed `dcts compile` (exit 3)."""
+    text = SHEET_SPEC.replace("    - {frame: tool, axis: z, min: 0.1}\n", "    - {frame: tool, axis: z, expressed_in: table, min: 0.1}\n")
+    (tmp_path / "sheet.yaml").write_text(text)
+    robot = validate_spec(load_spec(tmp_path / "sheet.yaml")).robot
+    assert robot.cartesian_bounds[0].label == "z" and robot.cartesian_bounds[0].c_min == pytest.approx(0.3)
+    compile_bundle(tmp_path / "sheet.yaml", tmp_path / "bundle", build=False)
+    header = (tmp_path / "bundle" / "sheet.h").read_text()
+    assert "0.3 m ≤ d.p; speed: no limit" in header and "axis z in frame table" in header
+
+
 def test_header_reference_layout_has_real_units(sheet):
     _, header = sheet
     layout = dict(re.findall(r"^ \*   (ref\[[\d.]+\])\s+task reach, (.*)$", header, re.M))

@@ -285,7 +285,8 @@ def _joint_and_cartesian_text(controller: Controller) -> str:
             f" *     {interval_text('d.p', b.c_min, b.c_max, 'm', DIGITS)}; {speed}; braking at {number(b.a_max)} m/s²",
         ]
         if spec_bound is not None and spec_bound.expressed_in not in (None, "world"):
-            lines.append(f" *     (the spec gives normal {fmt_list(spec_bound.normal)} in frame {spec_bound.expressed_in}: "
+            given = f"axis {spec_bound.axis}" if spec_bound.axis is not None else f"normal {fmt_list(spec_bound.normal)}"
+            lines.append(f" *     (the spec gives {given} in frame {spec_bound.expressed_in}: "
                          "d and the offsets above are that plane in the world)")
     return "\n".join(lines)
 

@@ -371,26 +371,29 @@ def _cartesian_bounds(spec: Spec, model: pin.Model, diags: list[Diagnostic]) -> 
             direction, shift = np.eye(3)[AXIS_INDEX[c.axis]], 0.0
         else:
             direction, shift = np.asarray(c.normal, dtype=float) / np.linalg.norm(c.normal), 0.0
-            if c.expressed_in not in (None, "world"):
-                if not model.existFrame(c.expressed_in):
-                    hint = frame_candidates(c.expressed_in, names, spec)
-                    diags.append(spec.source.diagnostic(at + ("expressed_in",), f"no frame {c.expressed_in!r}{hint}"))
-                    continue
-                frame = model.frames[model.getFrameId(c.expressed_in)]
-                if frame.parentJoint != 0:
-                    diags.append(spec.source.diagnostic(
-                        at + ("expressed_in",), f"frame {c.expressed_in!r} moves with joint {model.names[frame.parentJoint]!r}; "
-                        "a plane must be given in the world or in a frame fixed to it"))
-                    continue
-                # n̂ᵀ(Rᵀ(p − p_f)) = (R n̂)ᵀp − (R n̂)ᵀp_f: the same bounds on the world normal, shifted
-                placement = data.oMf[model.getFrameId(c.expressed_in)]
-                direction = placement.rotation @ direction
-                shift = float(direction @ placement.translation)
+        given = direction
+        if c.expressed_in not in (None, "world"):  # (an axis too: it was ignored, and the C header crashed)
+            if not model.existFrame(c.expressed_in):
+                hint = frame_candidates(c.expressed_in, names, spec)
+                diags.append(spec.source.diagnostic(at + ("expressed_in",), f"no frame {c.expressed_in!r}{hint}"))
+                continue
+            frame = model.frames[model.getFrameId(c.expressed_in)]
+            if frame.parentJoint != 0:
+                diags.append(spec.source.diagnostic(
+                    at + ("expressed_in",), f"frame {c.expressed_in!r} moves with joint {model.names[frame.parentJoint]!r}; "
+                    "a plane must be given in the world or in a frame fixed to it"))
+                continue
+            # n̂ᵀ(Rᵀ(p − p_f)) = (R n̂)ᵀp − (R n̂)ᵀp_f: the same bounds on the world normal, shifted
+            placement = data.oMf[model.getFrameId(c.expressed_in)]
+            direction = placement.rotation @ direction
+            shift = float(direction @ placement.translation)
+        # an axis keeps its name while it is a world axis (a frame that only moves the origin)
+        world_axis = c.axis is not None and np.allclose(direction, given, rtol=0.0, atol=1e-12)
         out.append(
             CartesianBound(
                 frame=c.frame,
                 direction=tuple(float(v) for v in direction),
-                label=c.axis if c.axis is not None else f"plane{i}",
+                label=c.axis if world_axis else f"plane{i}",
                 c_min=-np.inf if c.min is None else c.min + shift,
                 c_max=np.inf if c.max is None else c.max + shift,
                 v_max=np.inf if c.max_velocity is None else c.max_velocity,
