@@ -277,6 +277,21 @@ def test_feedforward_waypoints_are_a_smooth_timed_path_tracked_closely() -> None
     assert np.sqrt(np.mean(error**2)) < 0.01 * np.sqrt(np.mean(lag**2)) and lag.max() > 0.02  # m
 
 
+def test_a_paths_speed_follows_a_run_time_max_velocity() -> None:
+    """Segments were timed with the compiled max_velocity: set to 0.2 m/s at t = 0, the path
+    still peaked at the compiled 0.4."""
+    tasks = """
+  - {name: reach, type: position, frame: tool, priority: 1, gains: {kp: 400, kd: 40, max_velocity: 0.4}, reference: {input: true, feedforward: true}}
+  - {name: damping, type: joint, priority: 2, gains: {kp: 0, kd: 5}}"""
+    scenario = ("  duration: 0.6\n  waypoints: {task: reach, tolerance: 0.002, points: [[0.69, 0.1, 0.51]]}\n"
+                "  parameters: [{time: 0, values: {reach.max_velocity: 0.2}}]\n")
+    text = spec_text(scenario, tasks) + "parameters:\n  tasks: {reach: [max_velocity]}\n"
+    sim = prepare_simulation(load_spec_text(text), "python")
+    log = sim.run()
+    speed = np.linalg.norm(_ref_field(sim, log, "reach", "velocity"), axis=1)
+    assert 0.99 * 0.2 < speed.max() <= 0.2 + 1e-9
+
+
 def test_feedforward_of_an_orientation_path_is_in_the_tasks_own_rows() -> None:
     """A swing task ([rx, ry]: the frame's own axes): the fed rates are the time derivatives of
     the task's error towards the fed rpy, at a fixed configuration."""

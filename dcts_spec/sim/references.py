@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 
+from ..formulations.parameters import ParameterLayout
 from ..robot.model import Robot
 from ..spec.scenario import Waypoints
 from ..spec.units import joint_to_si, to_si
@@ -51,8 +52,14 @@ class WaypointFollower:
     Either way the last point is held until the end of the run.
     """
 
-    def __init__(self, waypoints: Waypoints, task: Task, layout: list[ReferenceInput], robot: Robot):
+    def __init__(self, waypoints: Waypoints, task: Task, layout: list[ReferenceInput], robot: Robot,
+                 parameters: ParameterLayout | None = None):
         self.task = task
+        # where the task's kp and max_velocity are run-time parameters: a segment is timed with the
+        # values in force when it starts (it was timed with the compiled ones)
+        names = {e.name: e.slice for e in (parameters or ParameterLayout()).entries}
+        self._gain_slices = {gain: names.get(f"{task.name}.{gain}") for gain in ("kp", "max_velocity")}
+        self._param: np.ndarray = parameters.defaults if parameters is not None else np.zeros(0)
         self.tolerance = float(waypoints.tolerance)
         entries = [r for r in layout if r.task == task.name and r.field in ("position", "rpy", "q")]
         self.slices = [(r.field, r.offset, r.size) for r in entries]
@@ -87,20 +94,25 @@ class WaypointFollower:
         """The task takes velocity and acceleration: the points are joined by a timed path."""
         return self._feeds is not None
 
-    def restart(self, ref: np.ndarray) -> None:
+    def restart(self, ref: np.ndarray, param: np.ndarray | None = None) -> None:
         """Back to the first point, none reached yet. `ref` holds the task's value at the start:
-        without feed-forward the first point goes into it, with it the path's start (at rest)."""
+        without feed-forward the first point goes into it, with it the path's start (at rest).
+        `param`: the run-time parameters in force at the start (default: the compiled values)."""
         self.index = 0
         self.reached_at[:] = np.nan
+        if param is not None:
+            self._param = param
         if self.feedforward:
             self._segment = self._segment_to(self._read(ref), 0.0)
             self._write_rates(ref, np.zeros(self.task.dim), np.zeros(self.task.dim))
         else:
             self._write_point(ref, self.points[0])
 
-    def update(self, t: float, q: np.ndarray, ref: np.ndarray) -> None:
+    def update(self, t: float, q: np.ndarray, ref: np.ndarray, param: np.ndarray | None = None) -> None:
         """Move on to the next point if the current one is reached at (t, q); with feed-forward,
-        write the path at t into `ref`."""
+        write the path at t into `ref`. `param`: the run-time parameters in force at t."""
+        if param is not None:
+            self._param = param
         segment = self._segment
         if segment is None:
             if self.finished or self.error_norm(q) > self.tolerance:
@@ -166,7 +178,12 @@ class WaypointFollower:
                 end[part] = start[part] + np.angle(np.exp(1j * (end[part] - start[part])))
             begin += size
         distance = float(np.linalg.norm(self._distance(start, end)))
-        return Segment(start, end, t0, segment_duration(distance, self.task.kp, self.task.max_velocity))
+        kp, max_velocity = self.task.kp, self.task.max_velocity
+        if self._gain_slices["kp"] is not None:
+            kp = self._param[self._gain_slices["kp"]]
+        if self._gain_slices["max_velocity"] is not None:
+            max_velocity = float(self._param[self._gain_slices["max_velocity"]][0])
+        return Segment(start, end, t0, segment_duration(distance, kp, max_velocity))
 
     def _distance(self, start: np.ndarray, end: np.ndarray) -> np.ndarray:
         """The task's error at the reference `start` towards `end` (rows as the task has them)."""

@@ -62,7 +62,7 @@ class Simulation:
         self.waypoints: WaypointFollower | None = None
         if scenario.waypoints is not None:
             task = next(t for t in self.tasks if t.name == scenario.waypoints.task)
-            self.waypoints = WaypointFollower(scenario.waypoints, task, runtime.ref_layout, robot)
+            self.waypoints = WaypointFollower(scenario.waypoints, task, runtime.ref_layout, robot, self.param_layout)
 
     @property
     def param_layout(self) -> ParameterLayout:
@@ -97,8 +97,6 @@ class Simulation:
             self.runtime.set_params(layout.defaults)
         params = log.param
         ref = self.initial_ref.copy()
-        if follower is not None:
-            follower.restart(ref)
         self.reset()
         # Locals: attribute look-ups cost as much as the small numpy operations here.
         q, dq, ddq, tau, ddq_cmd = log.q, log.dq, log.ddq, log.tau, log.ddq_commanded
@@ -128,8 +126,10 @@ class Simulation:
                     self.runtime.set_params(values)
                     ramp.set(values)
                 params[k] = ramp.advance()
-                if follower is not None:
-                    follower.update(times[k], q[k], ref)
+                if follower is not None:  # (its segments timed with the gains set, not half-way along a ramp)
+                    if k == 0:  # (after the changes at t = 0: the first segment is timed with them)
+                        follower.restart(ref, ramp.target)
+                    follower.update(times[k], q[k], ref, ramp.target)
                 refs[k] = ref
                 if step_into is not None:
                     status[k] = step_into(q[k], dq[k], tau_meas[k], ref, tau[k], ddq_cmd[k], scaling[k])
