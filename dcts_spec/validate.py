@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -345,6 +346,11 @@ def _check_scenario(spec: Spec, robot: Robot) -> list[Diagnostic]:
         if d.type == "force":
             if not robot.has_frame(d.body):
                 diags.append(src.diagnostic(where + ("body",), f"no link or frame {d.body!r}{frame_candidates(d.body, frames, spec)}"))
+                continue
+            if robot.model.frames[robot.model.getFrameId(d.body)].parentJoint == 0:
+                diags.append(src.diagnostic(where + ("body",), f"{d.body} is fixed to the world: the robot does not feel "
+                                            "this push", "warning"))
+            diags += _push_sampling(spec, d, where)
         elif len(d.torque) != n:
             diags.append(src.diagnostic(where + ("torque",), f"{len(d.torque)} values for {n} joints"))
     late = [(("disturbances", i, "start"), "this push starts", d.start) for i, d in enumerate(sc.disturbances)]
@@ -364,6 +370,20 @@ def _check_scenario(spec: Spec, robot: Robot) -> list[Diagnostic]:
     if sc.waypoints is not None:
         diags += _check_waypoints(spec, robot)
     return diags
+
+
+def _push_sampling(spec: Spec, push, where: tuple) -> list[Diagnostic]:
+    """A warning when the simulation's steps give a push much more or less time than its duration:
+    MuJoCo holds a force over whole steps, those that start in [start, start + duration) (a 0.4 ms
+    push between two 1 ms steps acted on none, one at a step's start for the whole 1 ms)."""
+    step = spec.controller.period / spec.scenario.substeps  # type: ignore[union-attr]
+    first, end = (math.ceil(t / step - 1e-9) for t in (push.start, push.start + push.duration))
+    applied = (end - first) * step
+    if abs(applied - push.duration) <= 0.1 * push.duration:
+        return []
+    return [spec.source.diagnostic(where + ("duration",), (
+        f"the simulation's steps of {step:g} s give this push {applied:g} s of force for its {push.duration:g} s (MuJoCo "
+        "holds a force over whole steps): make it last several steps, or raise scenario.substeps"), "warning")]
 
 
 def _check_waypoints(spec: Spec, robot: Robot) -> list[Diagnostic]:

@@ -27,6 +27,7 @@ from dcts_spec.sim.runner import Simulation, prepare_simulation
 from dcts_spec.sim.runtime import RuntimeUnavailable, make_runtime
 from dcts_spec.sim.scenario import TorqueProfile
 from dcts_spec.spec import SpecError, load_spec_text
+from dcts_spec.validate import validate_spec
 
 HOME = "[0, 0.6, 0, -1.2, 0, 0.8, 0]"
 
@@ -92,6 +93,21 @@ def test_push_at_a_point_is_measured_as_jacobian_transpose_wrench() -> None:
     outside = np.r_[0:50, 152:log.steps]
     assert np.abs(log.tau_ext_true[outside]).max() == 0.0
     assert np.abs(log.tau_ext_measured[outside]).max() < 1e-9
+
+
+@pytest.mark.parametrize(("push", "substeps", "words"), [
+    ("{type: force, body: link7, force: [2000, 0, 0], start: 0.1002, duration: 0.0004}", 1, "0 s of force for its 0.0004 s"),
+    ("{type: force, body: link7, force: [2000, 0, 0], start: 0.1, duration: 0.0004}", 1, "0.001 s of force for its 0.0004 s"),
+    ("{type: force, body: link7, force: [2000, 0, 0], start: 0.1, duration: 0.0004}", 10, None),  # (4 substeps)
+    ("{type: force, body: base, force: [20, 0, 0], start: 0.1, duration: 0.1}", 1, "fixed to the world"),
+])
+def test_a_push_the_simulation_cannot_apply_as_written_is_warned_about(push: str, substeps: int, words: str | None) -> None:
+    """A push shorter than a simulation step acted for a whole step or not at all, and one on a
+    frame fixed to the world not at all, without a word."""
+    text = spec_text(f"  duration: 0.2\n  substeps: {substeps}\n  disturbances:\n    - {push}\n")
+    warnings = [d.message for d in validate_spec(load_spec_text(text)).diagnostics
+                if d.severity == "warning" and d.path[:2] == ("scenario", "disturbances")]
+    assert (any(words in w for w in warnings) if words else not warnings), warnings
 
 
 @pytest.mark.parametrize(("integrator", "substeps"), [("rk4", 1), ("implicitfast", 4), ("euler", 2)])
