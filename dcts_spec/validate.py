@@ -362,11 +362,18 @@ def _check_scenario(spec: Spec, robot: Robot) -> list[Diagnostic]:
     for i, p in enumerate(sc.payloads):
         if not robot.has_frame(p.frame):
             diags.append(src.diagnostic(at + ("payloads", i, "frame"), f"no frame {p.frame!r}{frame_candidates(p.frame, frames, spec)}"))
+        elif robot.model.frames[robot.model.getFrameId(p.frame)].parentJoint == 0:
+            diags.append(src.diagnostic(at + ("payloads", i, "frame"), f"{p.frame} is fixed to the world: the robot does "
+                                        "not carry this payload", "warning"))
     sensing = sc.sensing
     for name in ("noise_std", "bias"):
-        size = size_of(getattr(sensing, name))
+        value = getattr(sensing, name)
+        size = size_of(value)
         if size is not None and size != n:
             diags.append(src.diagnostic(at + ("external_torque", name), f"{size} values for {n} joints"))
+        elif sensing.mode != "noisy" and np.any(np.asarray(value) != 0):
+            diags.append(src.diagnostic(at + ("external_torque", name), f"acts only with mode: noisy (the mode is "
+                                        f"{sensing.mode}): it has no effect", "warning"))
     if sc.waypoints is not None:
         diags += _check_waypoints(spec, robot)
     return diags

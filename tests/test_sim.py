@@ -110,6 +110,16 @@ def test_a_push_the_simulation_cannot_apply_as_written_is_warned_about(push: str
     assert (any(words in w for w in warnings) if words else not warnings), warnings
 
 
+@pytest.mark.parametrize(("scenario", "words"), [
+    ("  payloads: [{frame: base, mass: 2}]\n", "base is fixed to the world: the robot does not carry this payload"),
+    ("  external_torque: {mode: ideal, noise_std: 0.5}\n", "acts only with mode: noisy (the mode is ideal)"),
+])
+def test_a_scenario_entry_without_effect_is_warned_about(scenario: str, words: str) -> None:
+    warnings = [d.message for d in validate_spec(load_spec_text(spec_text("  duration: 0.2\n" + scenario))).diagnostics
+                if d.severity == "warning"]
+    assert any(words in w for w in warnings), warnings
+
+
 @pytest.mark.parametrize(("integrator", "substeps"), [("rk4", 1), ("implicitfast", 4), ("euler", 2)])
 def test_push_with_other_integrators_is_measured_closely(integrator: str, substeps: int) -> None:
     sim, log = simulate(spec_text(PUSH + f"  integrator: {integrator}\n  substeps: {substeps}\n"))
