@@ -120,6 +120,23 @@ def test_a_scenario_entry_without_effect_is_warned_about(scenario: str, words: s
     assert any(words in w for w in warnings), warnings
 
 
+def test_a_cartesian_speed_limit_crossed_by_a_push_is_in_the_summary() -> None:
+    """A bound's max_velocity had no metric: a push took the tool 0.009 m/s past its 0.05 m/s and
+    the summary said Cartesian 0 m. The excess is checked against Pinocchio's frame velocity."""
+    limits = ("joint_torque: {max: 100}\n  joint_acceleration: {max: 20}\n"
+              "  cartesian: [{frame: tool, axis: z, min: 0.1, max_velocity: 0.05}]")
+    sim, log = simulate(spec_text("  duration: 0.25\n  disturbances:\n    - {type: force, body: link7, "
+                                  "force: [0, 0, -300], start: 0.05, duration: 0.1}\n", limits=limits))
+    summary = analyze(sim, log).summary
+    model = sim.robot.model
+    data, frame = model.createData(), model.getFrameId("tool")
+    speeds = [abs(pin.getFrameVelocity(model, data, frame, pin.LOCAL_WORLD_ALIGNED).linear[2])
+              for q, dq in zip(log.q, log.dq) if pin.forwardKinematics(model, data, q, dq) is None]
+    assert max(speeds) > 0.05 + 1e-3  # (the premise: the push beats the bound's braking)
+    assert summary["max_cartesian_velocity_violation"] == pytest.approx(max(speeds) - 0.05, rel=1e-9)
+    assert summary["units"]["max_cartesian_velocity_violation"] == "m/s"
+
+
 @pytest.mark.parametrize(("integrator", "substeps"), [("rk4", 1), ("implicitfast", 4), ("euler", 2)])
 def test_push_with_other_integrators_is_measured_closely(integrator: str, substeps: int) -> None:
     sim, log = simulate(spec_text(PUSH + f"  integrator: {integrator}\n  substeps: {substeps}\n"))

@@ -6,7 +6,9 @@ applied then, ramps included):
 - max_joint_position_violation = max_{k,j} max(0, q_j − q_max,j, q_min,j − q_j), rad
 - max_joint_velocity_violation = max_{k,j} max(0, |q̇_j| − q̇_max,j), rad/s; `_ratio`: over q̇_max,j
 - max_torque_violation = max_{k,j} max(0, |τ_j| − τ_max,j), Nm (τ as applied)
-- max_cartesian_violation = max over bounds and samples of the distance outside [c_min, c_max], m
+- max_cartesian_violation = max over bounds and samples of the distance outside [c_min, c_max], m;
+  max_cartesian_velocity_violation = max over bounds with a max_velocity and samples of
+  max(0, |dᵀṗ| − v_max), m/s (ṗ the velocity of the bound frame's origin)
 - max_torque_jump = max_{k,j} |τ_j,k − τ_j,k−1|, Nm; `_ratio`: over τ_max,j; torque_jump_steps =
   #{k: |τ_j,k − τ_j,k−1| > TORQUE_JUMP_FRACTION τ_max,j for some j}: step-to-step chatter (a push or
   a saturation can cause some); max_commanded_acceleration = max_{k,j} |q̈_cmd,j,k|, rad/s², and
@@ -103,6 +105,9 @@ def summarize(log: SimulationLog, series: TimeSeries, robot: Robot, priorities: 
         "max_joint_velocity_violation_ratio": _peak(velocity_excess / lim.v_max),
         "max_torque_violation": _peak(_excess(np.abs(log.tau), lim.tau_max)),
         "max_cartesian_violation": _cartesian_violation(series, robot),
+        "max_cartesian_velocity_violation": _peak(np.array([
+            _peak(_excess(np.abs(b.coordinate(series.frame_velocities[b.frame])), np.array(b.v_max)))
+            for b in robot.cartesian_bounds if np.isfinite(b.v_max)])),
         "max_torque_jump": _peak(torque_jump),
         "max_torque_jump_ratio": _peak(torque_jump / lim.tau_max[1:]),
         "torque_jump_steps": int(np.count_nonzero((torque_jump > TORQUE_JUMP_FRACTION * lim.tau_max[1:]).any(axis=1))),

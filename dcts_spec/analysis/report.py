@@ -40,6 +40,8 @@ def describe(run: RunResult) -> str:
     lines.append(f"  limits     worst excess: position {q('max_joint_position_violation')}, velocity "
                  f"{q('max_joint_velocity_violation')} ({100 * s['max_joint_velocity_violation_ratio']:.3g}% "
                  f"of its limit), torque {q('max_torque_violation')}, Cartesian {q('max_cartesian_violation')}"
+                 + (f" (speed {q('max_cartesian_velocity_violation')})" if s.get("max_cartesian_velocity_violation")
+                    else "")
                  + (f", collision {q('max_collision_violation')}" if "max_collision_violation" in s else ""))
     smoothness = (f"  smoothness torque steps between periods up to {q('max_torque_jump')} "
                   f"({100 * s['max_torque_jump_ratio']:.3g}% of its limit; {s['torque_jump_steps']} above "

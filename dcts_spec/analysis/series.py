@@ -38,6 +38,7 @@ class TimeSeries:
     task_errors: dict[str, np.ndarray]  # task → (N, m) Δx; −ẋ for a pure damping task
     acceleration_errors: dict[int, np.ndarray]  # priority → (N, m) J a + J̇q̇ − ẍ_d
     frame_positions: dict[str, np.ndarray]  # frame → (N, 3), Cartesian task and bound frames
+    frame_velocities: dict[str, np.ndarray]  # frame → (N, 3), the velocity of its origin (world axes)
     kinetic_energy: np.ndarray  # ½ q̇ᵀ M q̇
     task_kinetic_energy: np.ndarray  # ½ ẋᵀ Λ ẋ, all task rows stacked
     null_kinetic_energy: np.ndarray  # the rest
@@ -74,6 +75,8 @@ def evaluate(spec: Spec, robot: Robot, log: SimulationLog, problem: ControlProbl
         "error": ca.vertcat(*[lv.error for lv in levels]),
         "acceleration_error": ca.vertcat(*[ca.mtimes(lv.jacobian, a) + lv.bias - lv.target for lv in levels]),
         "position": ca.vertcat(*[problem.sym.frame_placement(f)[0] for f in frames]) if frames else ca.SX(0, 1),
+        "velocity": ca.vertcat(*[ca.mtimes(problem.sym.frame_jacobian(f)[:3, :], problem.dq) for f in frames])
+        if frames else ca.SX(0, 1),
         "M": ca.reshape(problem.mass_matrix, n * n, 1),
         "g": problem.gravity,
         "J": ca.reshape(jacobian, jacobian.numel(), 1),
@@ -108,6 +111,7 @@ def evaluate(spec: Spec, robot: Robot, log: SimulationLog, problem: ControlProbl
                 task_errors[task.name] = out["error"][:, rows]
             row += task.dim
     positions = {f: out["position"][:, 3 * i: 3 * i + 3] for i, f in enumerate(frames)}
+    velocities = {f: out["velocity"][:, 3 * i: 3 * i + 3] for i, f in enumerate(frames)}
     level_tasks = {lv.priority: tuple(t.name for t in lv.tasks) for lv in levels}
     level_units = {lv.priority: combine(task_unit(t, robot) for t in lv.tasks) for lv in levels}
 
@@ -115,7 +119,7 @@ def evaluate(spec: Spec, robot: Robot, log: SimulationLog, problem: ControlProbl
     effort = log.tau - out["g"]
     acceleration_energy = 0.5 * np.einsum("ki,ki->k", effort, np.linalg.solve(M, effort[..., None])[..., 0])
     payloads = spec.scenario.payloads if spec.scenario is not None else []
-    return TimeSeries(task_errors, acceleration_errors, positions, kinetic, task_kinetic,
+    return TimeSeries(task_errors, acceleration_errors, positions, velocities, kinetic, task_kinetic,
                       kinetic - task_kinetic, acceleration_energy, payload_torque(robot, payloads, log),
                       tuple(damping), units, level_tasks, level_units,
                       limits_in_force(problem.param_layout, param, robot))

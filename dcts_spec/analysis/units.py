@@ -24,6 +24,7 @@ FIXED_UNITS: dict[str, str] = {
     "diverged_at": "s",
     "max_joint_velocity_violation_ratio": "1",
     "max_cartesian_violation": "m",
+    "max_cartesian_velocity_violation": "m/s",
     "max_torque_jump_ratio": "1",
     "torque_jump_steps": "steps",
     "solver_failures": "steps",

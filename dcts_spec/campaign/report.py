@@ -2,7 +2,7 @@
 `dcts simulate` replays), plots of each metric against each swept value, one HTML page.
 
 Rates count the samples that ran (status ok): with a violation (any joint position, velocity,
-torque, Cartesian or collision bound crossed by more than `violation_tolerance`), with a
+torque, Cartesian (position or speed) or collision bound crossed by more than `violation_tolerance`), with a
 fallback step (status < 0: the fallback torque was applied), with a relaxed step (status 1),
 and not converged (diverged, or a task's final error above its `convergence` tolerance).
 """
@@ -22,7 +22,7 @@ from .document import ReportSettings
 from .results import REPLAYS
 
 VIOLATIONS = ("max_joint_position_violation", "max_joint_velocity_violation", "max_torque_violation",
-              "max_cartesian_violation", "max_collision_violation")
+              "max_cartesian_violation", "max_cartesian_velocity_violation", "max_collision_violation")
 LOWER_IS_WORSE = {"min_scaling", "waypoints_reached", "realtime_factor"}
 
 

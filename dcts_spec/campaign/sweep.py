@@ -29,7 +29,8 @@ Engine = Literal["ray", "serial"]
 TASK_METRICS = ("task_rms_error", "task_mean_error", "task_final_error")
 # Per-run numbers a report may rank (besides the task metrics and primary_rms_error).
 RUN_METRICS = ("max_joint_position_violation", "max_joint_velocity_violation", "max_joint_velocity_violation_ratio",
-               "max_torque_violation", "max_cartesian_violation", "max_collision_violation", "solver_failures",
+               "max_torque_violation", "max_cartesian_violation", "max_cartesian_velocity_violation",
+               "max_collision_violation", "solver_failures",
                "limits_relaxed", "min_scaling", "primary_mean_acceleration_error", "acceleration_energy_integral",
                "kinetic_energy_peak", "task_space_kinetic_energy_peak", "null_space_kinetic_energy_peak",
                "max_disturbance_torque", "max_external_torque_estimate_error", "wall_time")

@@ -21,8 +21,10 @@ def interval_text(name: str, lower: float, upper: float, unit: str, digits: int 
 
 
 def bound_text(b: CartesianBound) -> str:
-    """A Cartesian bound as an interval of the frame's coordinate, in m."""
-    return interval_text(f"{b.frame}.{b.label}", b.c_min, b.c_max, "m")
+    """A Cartesian bound as an interval of the frame's coordinate, in m, then its speed limit."""
+    name = f"{b.frame}.{b.label}"
+    text = interval_text(name, b.c_min, b.c_max, "m")
+    return text + (f", |{name}'| ≤ {b.v_max:.4g} m/s" if np.isfinite(b.v_max) else "")
 
 
 def joint_bound_text(robot: Robot, j: int) -> str:
