@@ -2,9 +2,10 @@
 `dcts simulate` replays), plots of each metric against each swept value, one HTML page.
 
 Rates count the samples that ran (status ok): with a violation (any joint position, velocity,
-torque, Cartesian (position or speed) or collision bound crossed by more than `violation_tolerance`), with a
-fallback step (status < 0: the fallback torque was applied), with a relaxed step (status 1),
-and not converged (diverged, or a task's final error above its `convergence` tolerance).
+torque, Cartesian (position or speed) or collision bound crossed by more than
+`violation_tolerance`), with a fallback step (status < 0: the fallback torque was applied), with a
+relaxed step (status 1), and not converged (diverged, or a task's final error above its
+`convergence` tolerance).
 """
 
 from __future__ import annotations
