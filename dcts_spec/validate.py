@@ -347,7 +347,7 @@ def _check_scenario(spec: Spec, robot: Robot) -> list[Diagnostic]:
             if not robot.has_frame(d.body):
                 diags.append(src.diagnostic(where + ("body",), f"no link or frame {d.body!r}{frame_candidates(d.body, frames, spec)}"))
                 continue
-            if robot.model.frames[robot.model.getFrameId(d.body)].parentJoint == 0:
+            if robot.fixed_to_world(d.body):
                 diags.append(src.diagnostic(where + ("body",), f"{d.body} is fixed to the world: the robot does not feel "
                                             "this push", "warning"))
             diags += _push_sampling(spec, d, where)
@@ -362,7 +362,7 @@ def _check_scenario(spec: Spec, robot: Robot) -> list[Diagnostic]:
     for i, p in enumerate(sc.payloads):
         if not robot.has_frame(p.frame):
             diags.append(src.diagnostic(at + ("payloads", i, "frame"), f"no frame {p.frame!r}{frame_candidates(p.frame, frames, spec)}"))
-        elif robot.model.frames[robot.model.getFrameId(p.frame)].parentJoint == 0:
+        elif robot.fixed_to_world(p.frame):
             diags.append(src.diagnostic(at + ("payloads", i, "frame"), f"{p.frame} is fixed to the world: the robot does "
                                         "not carry this payload", "warning"))
     sensing = sc.sensing

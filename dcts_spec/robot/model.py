@@ -94,6 +94,11 @@ def is_prismatic(joint: pin.JointModel) -> bool:
     return joint.shortname().removeprefix("JointModel").startswith("P")
 
 
+def prismatic_joints(model: pin.Model) -> np.ndarray:
+    """Per joint of `model` (the order of q): does it translate?"""
+    return np.array([is_prismatic(model.joints[j]) for j in range(1, model.njoints)], dtype=bool)
+
+
 @dataclass
 class Robot:
     """A fixed-base robot ready for the compiler: model, joint names, limits."""
@@ -117,10 +122,14 @@ class Robot:
     @property
     def prismatic(self) -> np.ndarray:
         """Per joint (the order of q): does it translate?"""
-        return np.array([is_prismatic(self.model.joints[j]) for j in range(1, self.model.njoints)], dtype=bool)
+        return prismatic_joints(self.model)
 
     def has_frame(self, name: str) -> bool:
         return self.model.existFrame(name)
+
+    def fixed_to_world(self, frame: str) -> bool:
+        """Does no joint move `frame` (a frame of the base: a push or payload there acts on nothing)?"""
+        return self.model.frames[self.model.getFrameId(frame)].parentJoint == 0
 
     def neutral_configuration(self) -> np.ndarray:
         """Middle of the joint range where it is finite, zero otherwise."""

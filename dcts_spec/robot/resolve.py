@@ -20,7 +20,7 @@ from ..spec.source import SourceMap
 from ..spec.types import as_list, size_of
 from ..spec.units import joint_to_si, to_si
 from .builtin import builtin_locked_joints, builtin_urdf_path, lock_joints
-from .model import CartesianBound, JointLimits, Robot, is_prismatic, multi_dof_kind, no_position_range
+from .model import CartesianBound, JointLimits, Robot, is_prismatic, multi_dof_kind, no_position_range, prismatic_joints
 from .urdf import build_model, mimic_joints
 
 AXIS_INDEX = {"x": 0, "y": 1, "z": 2}
@@ -48,8 +48,7 @@ def resolve_robot(spec: Spec) -> tuple[Robot, list[Diagnostic]]:
         diags.append(src.diagnostic(
             ("robot",), f"the URDF gives {', '.join(rangeless)} no position range (lower = upper): driven without "
                         f"position limits; give limits.joint_position to bound them", "warning"))
-    prismatic = np.array([is_prismatic(model.joints[j]) for j in range(1, model.njoints)], dtype=bool)
-    limits = _merge_limits(spec, urdf_limits, prismatic, diags)
+    limits = _merge_limits(spec, urdf_limits, prismatic_joints(model), diags)
     bounds = _cartesian_bounds(spec, model, diags)
     if any(d.severity == "error" for d in diags):
         raise SpecError(diags)
