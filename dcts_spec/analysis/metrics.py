@@ -62,7 +62,7 @@ from ..robot.model import CartesianBound, JointLimits, Robot
 from ..sim.log import SimulationLog
 from ..symbolic import SymbolicRobot
 from .series import TimeSeries
-from .units import FIXED_UNITS, joints_unit, per, torque_unit
+from .units import FIXED_UNITS, joint_force_unit, joints_unit, per, torque_unit
 
 # A torque step between consecutive periods above this fraction of the joint's limit counts as a jump
 # (the issue's continuity check: no jump > 10 % of τ_max between states 1e-4 apart).
@@ -208,8 +208,7 @@ def _relaxed_bounds(log: SimulationLog, series: TimeSeries, robot: Robot, collis
 
 def _narrowed_joint(robot: Robot, limits: JointLimits, j: int, steps: np.ndarray) -> str:
     """Joint j's limits that differ from the compiled ones in `steps`, as text ('' if none)."""
-    unit = joint_unit(robot, j)
-    force = "Nm" if unit == "rad" else "N"
+    unit, force = joint_unit(robot, j), joint_force_unit(robot, j)
     quantities = (("q_min", "min position", unit), ("q_max", "max position", unit),
                   ("v_max", "max velocity", per(unit, "s")), ("a_max", "max acceleration", per(unit, "s²")),
                   ("tau_max", "max torque" if force == "Nm" else "max force", force))

@@ -14,7 +14,7 @@ from matplotlib.figure import Figure
 from ..controller import STATUS_LIMITS_RELAXED
 from ..limits.naming import cartesian_row_name, joint_row_name, joint_unit
 from .run import RunResult
-from .units import per
+from .units import joint_force_unit, per
 
 LIMIT_COLOR = "#d62728"
 RELAXED_COLOR = "#ff7f0e"
@@ -86,9 +86,9 @@ def shade_limits(ax: Axes, time: np.ndarray, lower: np.ndarray, upper: np.ndarra
 
 def joint_quantity_unit(run: RunResult, j: int, per_time: str | None) -> str:
     """Joint j's unit of position (per_time ""), of its rate (per_time "s"), or of force (None)."""
-    unit = joint_unit(run.robot, j)
     if per_time is None:
-        return "Nm" if unit == "rad" else "N"
+        return joint_force_unit(run.robot, j)
+    unit = joint_unit(run.robot, j)
     return per(unit, per_time) if per_time else unit
 
 

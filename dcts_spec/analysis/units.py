@@ -57,9 +57,14 @@ def joints_unit(robot: Robot, joints: Iterable[int] | None = None) -> str:
     return combine(joint_unit(robot, j) for j in (range(robot.nv) if joints is None else joints))
 
 
+def joint_force_unit(robot: Robot, j: int) -> str:
+    """Joint j's torque unit: Nm, or N for a prismatic joint."""
+    return "Nm" if joint_unit(robot, j) == "rad" else "N"
+
+
 def torque_unit(robot: Robot) -> str:
     """Nm for revolute joints, N for prismatic ones."""
-    return combine("Nm" if joint_unit(robot, j) == "rad" else "N" for j in range(robot.nv))
+    return combine(joint_force_unit(robot, j) for j in range(robot.nv))
 
 
 def task_unit(task: Task, robot: Robot) -> str:
