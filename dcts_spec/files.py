@@ -21,6 +21,7 @@ import json
 import secrets
 import shutil
 import time
+from collections.abc import Iterable
 from fnmatch import fnmatch
 from pathlib import Path
 
@@ -173,6 +174,23 @@ def install(staging: Path, folder: Path, kind: str, regenerated: tuple[str, ...]
     finally:
         shutil.rmtree(trash, ignore_errors=True)
     staging.rmdir()
+
+
+def claim(folder: Path, kind: str, entries: Iterable[str]) -> None:
+    """Record in `folder`'s OWNED file that it holds an output of `kind` with these top-level
+    `entries`, for an output dcts adds to in place (a campaign): the paths OWNED lists stay listed,
+    and an OWNED file from before paths were listed stays without them (`lists_paths`)."""
+    owned = _owned(folder)
+    state: dict = {"kind": kind, "entries": sorted(entries)}
+    if not isinstance(owned, list):
+        state["paths"] = owned.get("paths", []) if isinstance(owned, dict) else []
+    (folder / OWNED).write_text(json.dumps(state) + "\n")
+
+
+def lists_paths(folder: Path) -> bool:
+    """Does `folder`'s OWNED file list the paths dcts wrote (not one from before they were)?"""
+    owned = _owned(folder)
+    return isinstance(owned, dict) and "paths" in owned
 
 
 def install_files(staging: Path, folder: Path, previous: set[str]) -> None:

@@ -19,7 +19,8 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
-from ..files import OWNED, OutputFolderError, check_writable, install_files, owned_names, remove_stale_staging
+from ..files import (OutputFolderError, check_writable, claim, install_files, lists_paths, owned_names,
+                     remove_stale_staging)
 from ..spec.errors import Diagnostic, SpecError, shown
 
 STATE = "campaign.json"
@@ -65,12 +66,7 @@ class ResultsFolder:
         self.check()
         state_file = self.folder / STATE
         self.folder.mkdir(parents=True, exist_ok=True)
-        owned = self.folder / OWNED
-        recorded = json.loads(owned.read_text()) if owned.is_file() else {}
-        state = {"kind": "campaign", "entries": sorted(NAMES)}
-        if isinstance(recorded, dict):  # (the report's files; an older dcts's list has none: see _earlier_report)
-            state["paths"] = recorded.get("paths", [])
-        owned.write_text(json.dumps(state) + "\n")
+        claim(self.folder, "campaign", NAMES)  # (an older dcts's OWNED lists no report files: _earlier_report)
         state_file.write_text(json.dumps(self.state, indent=2) + "\n")
         return self._finished(samples)
 
@@ -140,7 +136,7 @@ class ResultsFolder:
 
     def _earlier_report(self) -> set[str]:
         """The report files of a campaign folder whose OWNED file predates the list of paths."""
-        if "paths" in (json.loads((self.folder / OWNED).read_text()) or {}):
+        if lists_paths(self.folder):
             return set()
         plots = self.folder / "plots"
         return {"report.json", "report.html", *(f"plots/{p.name}" for p in plots.glob("*.png")),
