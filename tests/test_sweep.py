@@ -562,3 +562,27 @@ def test_sweep_help_and_an_unknown_optimize_metric(spec_file, campaign_file, tmp
     assert not (tmp_path / "o").exists()  # refused before anything was written
     result = invoke("sweep", str(tmp_path / "missing.yaml"), "--campaign", str(campaign_file), "-o", str(tmp_path / "o"))
     assert result.exit_code == 1 and str(tmp_path / "missing.yaml") in result.stderr and "Traceback" not in result.output
+
+
+def test_a_campaign_where_no_sample_ran_exits_1_with_the_first_reason(spec_file, campaign_file, tmp_path,
+                                                                      monkeypatch) -> None:
+    """Every sample invalid (here: a spec the draws make invalid) printed its report and exited 0."""
+    spec_data = SampleRunner.spec_data
+
+    def broken(self, sample):
+        data = spec_data(self, sample)
+        data["limits"]["joint_torque"]["max"] = -1.0  # no draw does this: refused by the spec's own check
+        return data
+
+    monkeypatch.setattr(SampleRunner, "spec_data", broken)
+    out = tmp_path / "out"
+    result = invoke("sweep", str(spec_file), "--campaign", str(campaign_file), "-o", str(out), "--serial",
+                    "--no-plots")
+    assert result.exit_code == 1, result.output
+    assert "(0 ran, 6 invalid, 0 errors)" in result.stdout
+    assert "first invalid sample (0): " in result.stdout and "limits.joint_torque.max" in result.stdout, result.stdout
+    assert f"error: no sample ran (6 invalid, 0 errors); each sample's reason is in {out / 'samples.jsonl'}" \
+        in result.stderr
+    report = json.loads((out / "report.json").read_text())
+    assert report["first_not_run"]["invalid"]["index"] == 0
+    assert "First invalid sample (0):" in (out / "report.html").read_text()

@@ -1,6 +1,6 @@
 """What `dcts sweep` does once its arguments are parsed: a campaign (or an optimization), its
-summary on the terminal, and an exit code (1 for a bad input, with its location; 130 when
-interrupted, the finished samples kept for the next run to resume from)."""
+summary on the terminal, and an exit code (1 for a bad input, with its location, or when no
+sample ran; 130 when interrupted, the finished samples kept for the next run to resume from)."""
 
 from __future__ import annotations
 
@@ -78,4 +78,9 @@ def sweep_command(c: SweepCommand) -> int:
                    if (c.out / name).is_file()]
         written += [f"{name}/" for name, what in (("plots", "plots"), ("replays", "worst_cases")) if result.report[what]]
         typer.echo(f"wrote {c.out}/ ({', '.join(written)}){state}")
+    rates = result.report["rates"]
+    if rates["samples"] and not rates["ran"]:  # a report of nothing is no result: say so, also under -q
+        typer.echo(f"error: no sample ran ({rates['invalid']} invalid, {rates['errors']} errors); each sample's "
+                   f"reason is in {c.out / SAMPLES}", err=True)
+        return 1
     return 0

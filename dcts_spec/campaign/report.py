@@ -53,6 +53,17 @@ def rates(rows: list[dict[str, Any]], settings: ReportSettings) -> dict[str, Any
     return out
 
 
+def first_not_run(rows: list[dict[str, Any]]) -> dict[str, Any]:
+    """The first invalid sample and the first that hit an error, each with its reason: what a
+    user reads first when samples did not run (every row keeps its own)."""
+    out = {}
+    for status in ("invalid", "error"):
+        first = next((r for r in rows if r["status"] == status), None)
+        if first is not None:
+            out[status] = {"index": first["index"], "error": first["error"]}
+    return out
+
+
 def worst_cases(rows: list[dict[str, Any]], metric: str, count: int, tolerance: float) -> list[dict[str, Any]]:
     """The `count` samples with the worst value of `metric` (highest; lowest for a scaling or a
     rate), among those that ran and have it; a violation only beyond `tolerance` (the report's
@@ -131,6 +142,8 @@ def write_html(report: dict[str, Any], plots: list[str], path: Path) -> None:
     r = report["rates"]
     t = report["throughput"]
     images = "".join(f'<figure><img src="{e(p)}" alt="{e(p)}"></figure>' for p in plots)
+    not_run = "".join(f"<p>First {status} sample ({first['index']}):</p><pre>{e(first['error'].strip())}</pre>"
+                      for status, first in report["first_not_run"].items())
     tuned = ""
     if "optimize" in report:
         o = report["optimize"]
@@ -147,7 +160,7 @@ td,th{{border:1px solid #ccc;padding:.3em .6em;text-align:left}} img{{max-width:
 <body><h1>{e(report['title'])}</h1>
 <p>{r['samples']} samples: {r['ran']} ran, {r['invalid']} invalid, {r['errors']} errors.
 Engine: {e(t['engine'])} ({workers(t['workers'])}), {_g(t['samples_per_second'])} samples/s this run.</p>
-{tuned}
+{not_run}{tuned}
 <h2>Rates (of the samples that ran)</h2><table><tr><th>samples with</th><th>count</th><th>rate</th></tr>{rate_rows}</table>
 <h2>Metrics</h2><table><tr><th>metric</th><th>mean</th><th>worst</th></tr>{metric_rows}</table>
 <h2>Worst cases</h2><p>Each replays as a plain <code>dcts simulate</code> (run from the folder the campaign ran in).</p>
@@ -178,6 +191,10 @@ def summary_lines(report: dict[str, Any]) -> list[str]:
     if t["samples"]:
         lines.append(f"  {t['engine']} engine, {workers(t['workers'])}: {t['samples']} samples in {t['seconds']:.1f} s, "
                      f"{t['samples_per_second']:.2f} samples/s (startup {t['startup_seconds']:.1f} s)")
+    for status, first in report["first_not_run"].items():
+        reason = first["error"].strip().splitlines()
+        # a spec error's first line locates it; a traceback's last line says what it was
+        lines.append(f"  first {status} sample ({first['index']}): {reason[0] if status == 'invalid' else reason[-1]}")
     for w in report["worst_cases"][:5]:
         lines.append(f"  worst {w['metric']} = {w['value']:.4g} (sample {w['index']}): {w['command']}")
     return lines

@@ -20,7 +20,7 @@ from ..spec.errors import Diagnostic, SpecError, did_you_mean
 from .document import MAX_SAMPLES, Campaign, load_campaign
 from .engine import Pool, RayPool, SerialPool, Throughput, check_address, ray_session
 from .progress import sample_progress
-from .report import rates, replay_name, save_json, summarize_metrics, workers, worst_cases, write_html, write_plots
+from .report import first_not_run, rates, replay_name, save_json, summarize_metrics, workers, worst_cases, write_html, write_plots
 from .results import REPLAYS, ResultsFolder
 from .runner import CampaignInputs, SampleRunner
 from .scenario import replay_yaml
@@ -165,7 +165,7 @@ class CampaignSession:
                 "title": f"{self.driver.spec.name}: campaign {self.campaign_file.name}",
                 "spec": str(self.spec_file), "campaign": str(self.campaign_file),
                 "samples": self.driver.sampler.count, "finished": len(rows),
-                "rates": rates(rows, settings),
+                "rates": rates(rows, settings), "first_not_run": first_not_run(rows),
                 "metrics": summarize_metrics(rows, list(settings.metrics)),
                 "worst_cases": worst, "plots": plots, "throughput": throughput.to_dict(), **extra,
             }
