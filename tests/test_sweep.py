@@ -23,13 +23,14 @@ from command_line import MINIMAL, ROOT, invoke
 
 from dcts_spec.campaign import SweepOptions, load_campaign_text, sweep, tune
 from dcts_spec.campaign.engine import RayPool
-from dcts_spec.campaign.report import save_json, worst_cases
+from dcts_spec.campaign.report import save_json, summary_lines, worst_cases
 from dcts_spec.campaign.results import NAMES
 from dcts_spec.files import OWNED
 from dcts_spec.campaign.runner import CampaignInputs, SampleRunner, metric_columns
 from dcts_spec.campaign.sampling import Sampler
 from dcts_spec.campaign.scenario import JointRange, sample_spec_data
 from dcts_spec.campaign.schema import campaign_json_schema_text
+from dcts_spec.campaign.units import labelled
 from dcts_spec.campaign.sweep import CampaignSession, check_campaign
 from dcts_spec.spec import SpecError
 
@@ -586,3 +587,21 @@ def test_a_campaign_where_no_sample_ran_exits_1_with_the_first_reason(spec_file,
     report = json.loads((out / "report.json").read_text())
     assert report["first_not_run"]["invalid"]["index"] == 0
     assert "First invalid sample (0):" in (out / "report.html").read_text()
+
+
+def test_the_report_gives_each_column_its_unit(serial_run) -> None:
+    """The report's plots, metrics and worst cases had no units (a push in N against a violation in
+    rad/s read as two bare numbers)."""
+    units = serial_run.report["units"]
+    swept = {"pushes[0].force.magnitude": "N", "pushes[0].point.z": "m", "pushes[0].start": "s",
+             "pushes[0].duration": "s", "payloads[0].mass": "kg", "external_torque.noise_std": "Nm",
+             "external_torque.bias.norm": "Nm", "external_torque.bias[6]": "Nm", "initial_state.offset.norm": "deg",
+             "initial_state.offset[0]": "deg", "controller.parameters.tool_position.kp": "1/s²"}
+    assert {k: units.get(k) for k in swept} == swept
+    # the metrics' (the primary task is a position, every joint revolute)
+    expected = {"primary_rms_error": "m", "max_torque_violation": "Nm", "max_joint_velocity_violation": "rad/s"}
+    assert {k: units[k] for k in expected} == expected
+    lines = summary_lines(serial_run.report)
+    assert any(line.startswith("  worst primary_rms_error = ") and " m (sample " in line for line in lines), lines
+    assert labelled("pushes[0].force.magnitude", units) == "pushes[0].force.magnitude [N]"
+    assert labelled("model_mismatch.mass_scale", {"model_mismatch.mass_scale": "1"}) == "model_mismatch.mass_scale"

@@ -62,7 +62,7 @@ from ..robot.model import CartesianBound, JointLimits, Robot
 from ..sim.log import SimulationLog
 from ..symbolic import SymbolicRobot
 from .series import TimeSeries
-from .units import FIXED_UNITS, joint_force_unit, joints_unit, per, torque_unit
+from .units import joint_force_unit, per, run_units
 
 # A torque step between consecutive periods above this fraction of the joint's limit counts as a jump
 # (the issue's continuity check: no jump > 10 % of τ_max between states 1e-4 apart).
@@ -143,28 +143,8 @@ def summarize(log: SimulationLog, series: TimeSeries, robot: Robot, priorities: 
 def summary_units(summary: dict[str, Any], series: TimeSeries, robot: Robot) -> dict[str, Any]:
     """The unit of every numeric entry of `summary` (per task or level for the nested ones): the
     `units` entry of summary.json."""
-    joint = joints_unit(robot)
-    levels = {str(p): per(u, "s²") for p, u in series.level_units.items()}
-    primary = next(iter(levels.values()), "1")
-    units: dict[str, Any] = {
-        "max_joint_position_violation": joint,
-        "max_joint_velocity_violation": per(joint, "s"),
-        "max_torque_violation": torque_unit(robot),
-        "max_torque_jump": torque_unit(robot),
-        "max_commanded_acceleration": per(joint, "s²"),
-        "max_disturbance_torque": torque_unit(robot),
-        "max_external_torque_estimate_error": torque_unit(robot),
-        "relaxed_bounds": {"steps": "steps", "first": "s", "last": "s"},
-        "min_distances": "m",
-        "collision_violations": {"min_distance": "m", "by": "m", "steps": "steps", "first": "s", "last": "s"},
-        "max_collision_violation": "m",
-        "min_scaling_at": {"time": "s"},
-        "primary_mean_acceleration_error": primary,
-        "mean_acceleration_error": levels,
-        **{key: dict(series.task_units) for key in ("task_rms_error", "task_mean_error", "task_final_error")},
-    }
-    return {key: units.get(key, FIXED_UNITS.get(key)) for key in summary
-            if key in units or key in FIXED_UNITS}
+    units = run_units(series.task_units, series.level_units, robot)
+    return {key: units[key] for key in summary if key in units}
 
 
 def _min_scaling_at(log: SimulationLog, series: TimeSeries, priorities: list[int]) -> dict[str, Any] | None:

@@ -25,8 +25,8 @@ from ..robot.model import Robot
 from ..sim.log import SimulationLog
 from ..spec import Spec
 from ..spec.scenario import Payload
-from ..tasks import CartesianTask, Task
-from .units import combine, per, task_unit
+from ..tasks import CartesianTask
+from .units import level_units, pure_damping, task_error_units
 
 PINV_RCOND = 1e-10  # relative cut-off of the pseudo-inverse of J M⁻¹ Jᵀ
 
@@ -97,23 +97,20 @@ def evaluate(spec: Spec, robot: Robot, log: SimulationLog, problem: ControlProbl
     J = out["J"].reshape(samples, n, m).transpose(0, 2, 1)
     velocity_error = -np.einsum("kij,kj->ki", J, log.dq)
 
-    task_errors, acceleration_errors, units, damping, row = {}, {}, {}, [], 0
+    task_errors, acceleration_errors, damping, row = {}, {}, [], 0
     for lv in levels:
         acceleration_errors[lv.priority] = out["acceleration_error"][:, row: row + lv.dim]
         for task in lv.tasks:
             rows = slice(row, row + task.dim)
-            units[task.name] = task_unit(task, robot)
-            if _pure_damping(task):
+            if pure_damping(task):
                 damping.append(task.name)
                 task_errors[task.name] = velocity_error[:, rows]
-                units[task.name] = per(units[task.name], "s")
             else:
                 task_errors[task.name] = out["error"][:, rows]
             row += task.dim
     positions = {f: out["position"][:, 3 * i: 3 * i + 3] for i, f in enumerate(frames)}
     velocities = {f: out["velocity"][:, 3 * i: 3 * i + 3] for i, f in enumerate(frames)}
     level_tasks = {lv.priority: tuple(t.name for t in lv.tasks) for lv in levels}
-    level_units = {lv.priority: combine(task_unit(t, robot) for t in lv.tasks) for lv in levels}
 
     kinetic, task_kinetic = _kinetic_energies(M, J, log.dq)
     effort = log.tau - out["g"]
@@ -121,13 +118,8 @@ def evaluate(spec: Spec, robot: Robot, log: SimulationLog, problem: ControlProbl
     payloads = spec.scenario.payloads if spec.scenario is not None else []
     return TimeSeries(task_errors, acceleration_errors, positions, velocities, kinetic, task_kinetic,
                       kinetic - task_kinetic, acceleration_energy, payload_torque(robot, payloads, log),
-                      tuple(damping), units, level_tasks, level_units,
+                      tuple(damping), task_error_units(levels, robot), level_tasks, level_units(levels, robot),
                       limits_in_force(problem.param_layout, param, robot))
-
-
-def _pure_damping(task: Task) -> bool:
-    """No reference at all: the task only damps its velocity (kd), its Δx is 0 by construction."""
-    return not task.reference_is_input and not task.constant_reference()
 
 
 def payload_torque(robot: Robot, payloads: Sequence[Payload], log: SimulationLog) -> np.ndarray:

@@ -6,10 +6,12 @@ steps. A set of joints or task rows mixing units reads "m, rad" (a norm over bot
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
+from typing import Any
 
 from ..limits.naming import joint_unit
 from ..robot.model import Robot
+from ..formulations.problem import Level
 from ..tasks import CartesianTask, JointTask, Task
 
 TRANSLATION = ("x", "y", "z")
@@ -73,3 +75,45 @@ def task_unit(task: Task, robot: Robot) -> str:
         return joints_unit(robot, task.joint_indices)
     assert isinstance(task, CartesianTask)
     return combine("m" if a in TRANSLATION else "rad" for a in task.axes)
+
+
+def pure_damping(task: Task) -> bool:
+    """No reference at all: the task only damps its velocity (kd), its Δx is 0 by construction;
+    its error is reported as a velocity error."""
+    return not task.reference_is_input and not task.constant_reference()
+
+
+def task_error_units(levels: Sequence[Level], robot: Robot) -> dict[str, str]:
+    """Task → the unit of its reported error rows: its rows' unit, per s for a pure damping task."""
+    return {t.name: per(task_unit(t, robot), "s") if pure_damping(t) else task_unit(t, robot)
+            for lv in levels for t in lv.tasks}
+
+
+def level_units(levels: Sequence[Level], robot: Robot) -> dict[int, str]:
+    """Priority → the unit of its rows' positions (its accelerations: per s²)."""
+    return {lv.priority: combine(task_unit(t, robot) for t in lv.tasks) for lv in levels}
+
+
+def run_units(task_units: dict[str, str], levels: dict[int, str], robot: Robot) -> dict[str, Any]:
+    """The unit of every numeric entry a run's summary can have (per task or level for the nested
+    ones); `summary_units` keeps those of one summary, a campaign's report those of its columns."""
+    joint = joints_unit(robot)
+    level_accelerations = {str(p): per(u, "s²") for p, u in levels.items()}
+    return {
+        **FIXED_UNITS,
+        "max_joint_position_violation": joint,
+        "max_joint_velocity_violation": per(joint, "s"),
+        "max_torque_violation": torque_unit(robot),
+        "max_torque_jump": torque_unit(robot),
+        "max_commanded_acceleration": per(joint, "s²"),
+        "max_disturbance_torque": torque_unit(robot),
+        "max_external_torque_estimate_error": torque_unit(robot),
+        "relaxed_bounds": {"steps": "steps", "first": "s", "last": "s"},
+        "min_distances": "m",
+        "collision_violations": {"min_distance": "m", "by": "m", "steps": "steps", "first": "s", "last": "s"},
+        "max_collision_violation": "m",
+        "min_scaling_at": {"time": "s"},
+        "primary_mean_acceleration_error": next(iter(level_accelerations.values()), "1"),
+        "mean_acceleration_error": level_accelerations,
+        **{key: dict(task_units) for key in ("task_rms_error", "task_mean_error", "task_final_error")},
+    }

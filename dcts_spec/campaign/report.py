@@ -21,6 +21,7 @@ from matplotlib.figure import Figure
 from ..analysis.metrics import json_ready
 from .document import ReportSettings
 from .results import REPLAYS
+from .units import labelled, with_unit
 
 VIOLATIONS = ("max_joint_position_violation", "max_joint_velocity_violation", "max_torque_violation",
               "max_cartesian_violation", "max_cartesian_velocity_violation", "max_collision_violation")
@@ -87,23 +88,25 @@ def summarize_metrics(rows: list[dict[str, Any]], metrics: list[str]) -> dict[st
     return out
 
 
-def write_plots(rows: list[dict[str, Any]], swept: list[str], metrics: list[str], folder: Path) -> list[str]:
+def write_plots(rows: list[dict[str, Any]], swept: list[str], metrics: list[str], units: dict[str, str],
+                folder: Path) -> list[str]:
     """plots/<value>.png: each metric against one swept value (a point per sample; a per-joint
-    value by its norm over the joints); the names, relative to the campaign folder."""
+    value by its norm over the joints), each axis with its unit (`units`: column → unit); the
+    names, relative to the campaign folder."""
     ran = [r for r in rows if r["status"] == "ok"]
     written = []
     (folder / "plots").mkdir(exist_ok=True)
     for column in _numeric_columns(ran, swept):
         # No layout engine: constrained layout was most of the time of a report (a second a figure).
         fig = Figure(figsize=(3.3 * len(metrics), 2.8))
-        fig.subplots_adjust(left=0.6 / (3.3 * len(metrics)), right=0.98, bottom=0.17, top=0.95, wspace=0.4)
+        fig.subplots_adjust(left=1.0 / (3.3 * len(metrics)), right=0.98, bottom=0.17, top=0.95, wspace=0.6)
         for ax, metric in zip(fig.subplots(1, len(metrics), squeeze=False)[0], metrics):
             points = [(r[column], r[metric]) for r in ran if r.get(metric) is not None and r.get(column) is not None]
             if points:
                 xs, ys = zip(*points)
                 ax.scatter(xs, ys, s=6, alpha=0.6, linewidths=0)
-            ax.set_xlabel(column, fontsize=8)
-            ax.set_ylabel(metric, fontsize=8)
+            ax.set_xlabel(labelled(column, units), fontsize=8)
+            ax.set_ylabel(labelled(metric, units), fontsize=8)
             ax.tick_params(labelsize=7)
             ax.grid(alpha=0.3)
         name = f"plots/{_file_name(column)}.png"
@@ -134,11 +137,14 @@ def write_html(report: dict[str, Any], plots: list[str], path: Path) -> None:
     rate_rows = "".join(
         f"<tr><td>{e(name)}</td><td>{v['samples']}</td><td>{_percent(v['rate'])}</td></tr>"
         for name, v in report["rates"].items() if isinstance(v, dict))
+    units = report["units"]
     worst_rows = "".join(
-        f"<tr><td>{e(w['metric'])}</td><td>{w['value']:.6g}</td><td>{w['index']}</td><td>{w['seed']}</td>"
-        f"<td><code>{e(w['command'])}</code></td></tr>" for w in report["worst_cases"])
+        f"<tr><td>{e(w['metric'])}</td><td>{e(with_unit(format(w['value'], '.6g'), w['metric'], units))}</td>"
+        f"<td>{w['index']}</td><td>{w['seed']}</td><td><code>{e(w['command'])}</code></td></tr>"
+        for w in report["worst_cases"])
     metric_rows = "".join(
-        f"<tr><td>{e(m)}</td><td>{_g(v['mean'])}</td><td>{_g(v['worst'])}</td></tr>" for m, v in report["metrics"].items())
+        f"<tr><td>{e(m)}</td><td>{_g(v['mean'])}</td><td>{_g(v['worst'])}</td><td>{e(units.get(m, ''))}</td></tr>"
+        for m, v in report["metrics"].items())
     r = report["rates"]
     t = report["throughput"]
     images = "".join(f'<figure><img src="{e(p)}" alt="{e(p)}"></figure>' for p in plots)
@@ -162,7 +168,7 @@ td,th{{border:1px solid #ccc;padding:.3em .6em;text-align:left}} img{{max-width:
 Engine: {e(t['engine'])} ({workers(t['workers'])}), {_g(t['samples_per_second'])} samples/s this run.</p>
 {not_run}{tuned}
 <h2>Rates (of the samples that ran)</h2><table><tr><th>samples with</th><th>count</th><th>rate</th></tr>{rate_rows}</table>
-<h2>Metrics</h2><table><tr><th>metric</th><th>mean</th><th>worst</th></tr>{metric_rows}</table>
+<h2>Metrics</h2><table><tr><th>metric</th><th>mean</th><th>worst</th><th>unit</th></tr>{metric_rows}</table>
 <h2>Worst cases</h2><p>Each replays as a plain <code>dcts simulate</code> (run from the folder the campaign ran in).</p>
 <table><tr><th>metric</th><th>value</th><th>sample</th><th>seed</th><th>replay</th></tr>{worst_rows}</table>
 <h2>Metrics against the swept values</h2>{images}
@@ -196,7 +202,8 @@ def summary_lines(report: dict[str, Any]) -> list[str]:
         # a spec error's first line locates it; a traceback's last line says what it was
         lines.append(f"  first {status} sample ({first['index']}): {reason[0] if status == 'invalid' else reason[-1]}")
     for w in report["worst_cases"][:5]:
-        lines.append(f"  worst {w['metric']} = {w['value']:.4g} (sample {w['index']}): {w['command']}")
+        value = with_unit(format(w["value"], ".4g"), w["metric"], report["units"])
+        lines.append(f"  worst {w['metric']} = {value} (sample {w['index']}): {w['command']}")
     return lines
 
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 import traceback
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 from typing import Any
 
@@ -62,9 +63,12 @@ class SampleRunner:
                                  self.robot.prismatic)
         self.primary_task = min(self.spec.tasks, key=lambda t: t.priority).name
         self._bundles: dict[tuple[str | None, float], Path] = {}
-        # The symbolic problem the analysis evaluates: the samples change the scenario (and perhaps
-        # the formulation), never the tasks, limits or robot it is built from.
-        self._problem: ControlProblem | None = None
+
+    @cached_property
+    def problem(self) -> ControlProblem:
+        """The symbolic problem the analysis evaluates: the samples change the scenario (and perhaps
+        the formulation), never the tasks, limits or robot it is built from."""
+        return build_problem(self.spec, self.robot)
 
     def bundle(self, formulation: str | None, mass_scale: float) -> Path:
         """The built bundle of the spec's controller for this formulation and mass scale
@@ -103,8 +107,7 @@ class SampleRunner:
             sim = Simulation(spec, report.robot, scenario, runtime, scaled_robot(report.robot, scenario.mass_scale),
                              "c", formulation)
             log = sim.run()
-            self._problem = self._problem or build_problem(spec, report.robot)
-            result = analyze(sim, log, problem=self._problem)
+            result = analyze(sim, log, problem=self.problem)
         except Exception:  # a bug: recorded with its traceback, the campaign goes on
             if (signum := stop_signal()) is not None:
                 # a SIGTERM whose SystemExit landed in CasADi's C code arrives as a SystemError:

@@ -24,6 +24,7 @@ from .report import first_not_run, rates, replay_name, save_json, summarize_metr
 from .results import REPLAYS, ResultsFolder
 from .runner import CampaignInputs, SampleRunner
 from .scenario import replay_yaml
+from .units import column_units
 
 Engine = Literal["ray", "serial"]
 TASK_METRICS = ("task_rms_error", "task_mean_error", "task_final_error")
@@ -93,7 +94,7 @@ class CampaignSession:
         phase(f"building the C controller{'s' if len(self._bundles()) > 1 else ''} (once)")
         for formulation, mass_scale in self._bundles():
             self.driver.bundle(formulation, mass_scale)
-        check_parameters(self.driver)
+        self.parameter_units = check_parameters(self.driver)
         if check is not None:  # (the caller's own check of the inputs: an optimization's search space)
             check(self)
         self.rows = self.folder.open(self.driver.sampler.count)  # (only now: a refused campaign leaves no folder)
@@ -158,7 +159,10 @@ class CampaignSession:
             for metric in settings.metrics:
                 for row in worst_cases(rows, metric, settings.worst, settings.violation_tolerance):
                     worst.append(self._replay(metric, row, staging))
-            plots = write_plots(rows, self.driver.sampler.swept(), list(settings.metrics), staging) \
+            d = self.driver
+            units = column_units(d.sampler.variables, list(settings.metrics), d.robot, d.campaign, d.problem,
+                                 self.parameter_units, d.primary_task)
+            plots = write_plots(rows, d.sampler.swept(), list(settings.metrics), units, staging) \
                 if self.options.plots else []
             throughput = self.pool.throughput if self.pool else Throughput(self.options.engine, 0)
             report = {
@@ -167,7 +171,7 @@ class CampaignSession:
                 "samples": self.driver.sampler.count, "finished": len(rows),
                 "rates": rates(rows, settings), "first_not_run": first_not_run(rows),
                 "metrics": summarize_metrics(rows, list(settings.metrics)),
-                "worst_cases": worst, "plots": plots, "throughput": throughput.to_dict(), **extra,
+                "worst_cases": worst, "plots": plots, "throughput": throughput.to_dict(), "units": units, **extra,
             }
             save_json(report, staging / "report.json")
             write_html(report, plots, staging / "report.html")
@@ -257,12 +261,12 @@ def check_campaign(driver: SampleRunner) -> None:
         raise SpecError(diagnostics)
 
 
-def check_parameters(driver: SampleRunner) -> None:
+def check_parameters(driver: SampleRunner) -> dict[str, str]:
     """The swept run-time parameters exist in the compiled controller and their values stay in
-    its ranges (checked on the built bundle, which knows them)."""
+    its ranges (checked on the built bundle, which knows them); returns their units."""
     controller = driver.campaign.controller
     if controller is None or not controller.parameters:
-        return
+        return {}
     src = driver.campaign.source
     bundle = CompiledController(driver.bundle(driver.sampler.formulations[0], 1.0))
     layout = bundle.param_layout
@@ -298,3 +302,4 @@ def check_parameters(driver: SampleRunner) -> None:
                                                   f"{high:g}] {entry.unit}{which}"))
     if diagnostics:
         raise SpecError(diagnostics)
+    return {name: layout.entry(name).unit for name in controller.parameters}
