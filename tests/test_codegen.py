@@ -27,6 +27,7 @@ from dcts_spec.cli import app
 from dcts_spec.codegen import BundleCache, CodegenError, compile_bundle, compile_c, load_bundle, model_digest
 from dcts_spec.codegen.cache import KEY_FILE, default_cache_dir
 from dcts_spec.codegen.bundle import SPREAD_FRACTION, golden_tolerances
+from dcts_spec.codegen.spec_copy import copy_spec
 from dcts_spec.codegen.states import StateSampler
 from dcts_spec.controller import (
     STATUS_INVALID_OUTPUT,
@@ -420,8 +421,9 @@ def test_no_build_writes_sources_only(tmp_path):
 
 
 def test_bundle_spec_points_at_its_urdf_copy(tmp_path):
-    """A URDF spec's bundle holds the URDF, and its spec.yaml (otherwise the spec byte for byte)
-    points at it: copied elsewhere, without the original URDF, the bundle's spec validates."""
+    """A URDF spec's bundle holds the URDF, and its spec.yaml (otherwise the spec byte for byte,
+    but for the editor's schema line, whose relative path leads nowhere from the bundle) points at
+    it: copied elsewhere, without the original URDF, the bundle's spec validates."""
     from dcts_spec.robot.builtin import iiwa14_urdf_path
 
     (tmp_path / "robots").mkdir()
@@ -436,13 +438,30 @@ def test_bundle_spec_points_at_its_urdf_copy(tmp_path):
     assert report.manifest["spec_copy"] == {"spec": "spec.yaml", "urdf": "robot/my arm.urdf"}
     assert (out / "robot" / "my arm.urdf").read_bytes() == urdf.read_bytes()
     copied = (out / "spec.yaml").read_text()
-    assert copied == spec_file.read_text().replace("../robots/my arm.urdf", '"robot/my arm.urdf"')
+    schema_line = "# yaml-language-server: $schema=../schemas/dcts-spec.schema.json\n"
+    assert spec_file.read_text().startswith(schema_line)
+    assert copied == spec_file.read_text().replace("../robots/my arm.urdf", '"robot/my arm.urdf"').replace(schema_line, "")
     moved = tmp_path / "elsewhere" / "bundle"
     shutil.copytree(out, moved)
     shutil.rmtree(out)
     urdf.unlink()
     robot = validate_spec(load_spec(moved / "spec.yaml")).robot
     assert robot.joint_names == report.manifest["joints"]
+
+
+@pytest.mark.parametrize(("line", "kept"), [
+    ("# yaml-language-server: $schema=../schemas/dcts-spec.schema.json\n", False),
+    ("  #yaml-language-server:$schema=schema.json\n", False),
+    ("# yaml-language-server: $schema=https://example.org/dcts-spec.schema.json\n", True),
+    ("# yaml-language-server: $schema=/opt/dcts/dcts-spec.schema.json\n", True),
+    ("# a comment that names yaml-language-server\n", True),
+])
+def test_the_bundle_copy_drops_only_a_schema_line_it_cannot_reach(tmp_path, line, kept):
+    spec_file = tmp_path / "s.yaml"
+    spec_file.write_text(line + MINIMAL.read_text().split("\n", 1)[1])
+    copy_spec(load_spec(spec_file), None, tmp_path)
+    assert (tmp_path / "spec.yaml").read_text() == (spec_file.read_text() if kept else
+                                                    spec_file.read_text().replace(line, ""))
 
 
 def test_builtin_robot_spec_copied_as_is(built, three_levels_spec):

@@ -3,7 +3,9 @@ one (`robot/<file>.urdf`, which the copy's `robot.urdf` then points at), so that
 re-validates and recompiles wherever it is copied. A built-in robot (`robot: {model: iiwa14}`)
 needs nothing: dcts ships it, and the manifest keeps its model's SHA-256.
 
-The copy differs from the spec file only in that one value; `spec_sha256` stays the file's.
+The copy differs from the spec file only in that value and in an editor's schema line
+(`# yaml-language-server: $schema=../schemas/...`) whose relative path leads nowhere from the
+bundle: that line goes (a URL stays). `spec_sha256` stays the file's.
 """
 
 from __future__ import annotations
@@ -19,6 +21,9 @@ from ..spec import Spec
 
 URDF_FOLDER = "robot"
 _PLAIN = re.compile(r"[A-Za-z0-9_./-]+")  # a path YAML reads as the same string unquoted
+# yaml-language-server's modeline with a relative path (a URL has a scheme: "https:")
+_RELATIVE_SCHEMA_LINE = re.compile(r"^[ \t]*#[ \t]*yaml-language-server:[ \t]*\$schema=(?![A-Za-z][\w+.-]*:|/)[^\n]*\n?",
+                                   re.MULTILINE)
 
 
 def copy_spec(spec: Spec, spec_bytes: bytes | None, directory: Path) -> dict[str, str]:
@@ -30,6 +35,7 @@ def copy_spec(spec: Spec, spec_bytes: bytes | None, directory: Path) -> dict[str
             return {}
         spec_bytes = source.read_bytes()
     written = {"spec": "spec.yaml"}
+    spec_bytes = _RELATIVE_SCHEMA_LINE.sub("", spec_bytes.decode("utf-8")).encode("utf-8")
     if spec.robot.urdf is not None:
         urdf = spec.base_dir / spec.robot.urdf
         target = f"{URDF_FOLDER}/{urdf.name}"
