@@ -7,6 +7,7 @@ SampleRunner that keeps its loaded spec and bundles between samples.
 
 from __future__ import annotations
 
+import logging
 import os
 import signal
 import socket
@@ -161,9 +162,10 @@ def check_address(address: str, timeout: float = 5.0) -> None:
 
 
 @contextmanager
-def ray_session(address: str | None = None, cpus: int | None = None) -> Iterator[None]:
+def ray_session(address: str | None = None, cpus: int | None = None, quiet: bool = False) -> Iterator[None]:
     """Ray on this machine (no setup: a local session started and stopped here), or the cluster at
-    `address`; a session already open in this process (a test's, a notebook's) is used as it is."""
+    `address`; a session already open in this process (a test's, a notebook's) is used as it is.
+    `quiet`: Ray's notices at start-up (token authentication) are not printed, its errors are."""
     import ray
 
     if ray.is_initialized():
@@ -173,7 +175,14 @@ def ray_session(address: str | None = None, cpus: int | None = None) -> Iterator
     if address is None:
         options["num_cpus"] = cpus or os.cpu_count() or 1
     handlers = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
-    ray.init(address=address, **options)
+    ray_logger = logging.getLogger("ray")
+    level = ray_logger.level
+    if quiet:
+        ray_logger.setLevel(logging.ERROR)
+    try:
+        ray.init(address=address, **options)
+    finally:
+        ray_logger.setLevel(level)
     # Ray's core worker installs its own signal handlers: on SIGTERM it dumped a stack trace and
     # exited with 15, where the command stops cleanly (its samples kept) and exits with 143
     if threading.current_thread() is threading.main_thread():

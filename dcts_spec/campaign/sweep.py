@@ -121,7 +121,7 @@ class CampaignSession:
             self.pool = SerialPool(self.driver)
         elif self.pool is None:
             phase("starting Ray" + (f" at {self.options.address}" if self.options.address else " on this machine"))
-            self._stack.enter_context(ray_session(self.options.address))
+            self._stack.enter_context(ray_session(self.options.address, quiet=not self.options.progress))
             self.pool = RayPool(self.inputs, self.options.workers)
         return self.pool
 
