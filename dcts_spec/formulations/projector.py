@@ -20,7 +20,7 @@ Like the paper's eq. (5), the scaling multiplies ẍ_d, not −J̇q̇. Locking k
 consistency of the rest: the metric is the mass matrix of the robot with the locked joints'
 accelerations prescribed (Gauss's principle). Locks carry over to the levels below. An
 over-constrained lowest level (met in least squares) is not scaled: its violating joints are
-locked one by one, the most violating first. Every loop is unrolled n + 1 times, so the
+locked one by one, the most violating first, unless a lock would take rank from the levels above. Every loop is unrolled n + 1 times, so the
 generated code has a fixed cost. As in the paper, each torque is finally clipped to its limit
 without re-solving ("naive" saturation): SNS knows no torque limits, which is what breaks the
 velocity limits.
@@ -170,19 +170,31 @@ def _scaled_level(problem: ControlProblem, level: int, commands: list[Affine], f
 def _least_squares_level(problem: ControlProblem, commands: list[Affine], free: ca.SX, locked: ca.SX,
                          lower: ca.SX, upper: ca.SX) -> ca.SX:
     """The acceleration with an over-constrained lowest level met in least squares, its violating
-    joints locked one by one (the most violating first)."""
-    def acceleration(free: ca.SX, locked: ca.SX) -> ca.SX:
+    joints locked one by one (the most violating first). A lock that would take rank from the
+    levels above is not made (that joint stays free and the next one is tried): the lowest level
+    must not change what they get (locking every joint the tool needs once turned its
+    acceleration around)."""
+    def acceleration(free: ca.SX, locked: ca.SX) -> tuple[ca.SX, ca.SX]:
+        """The least-squares acceleration with these locks, and 1 where they cost the levels above rank."""
         metric_inverse, a0, W = _locked(problem, free, locked)
         h, N = recursive_hierarchy(problem, commands, 1, metric_inverse, a0, W)
-        return least_squares_step(problem.levels[-1], h.offset, N, problem.mass_matrix)
+        lost = _rank_lost(problem, len(commands) - 1, metric_inverse, W) if commands else ca.SX(0.0)
+        return least_squares_step(problem.levels[-1], h.offset, N, problem.mass_matrix), lost
 
-    result = acceleration(free, locked)
+    result, _ = acceleration(free, locked)
+    kept = ca.SX.zeros(problem.n)  # joints whose lock was refused
     for _ in range(problem.n):
-        violation = free * ca.fmax(ca.fmax(result - upper, lower - result), 0.0)
+        violation = free * (1.0 - kept) * ca.fmax(ca.fmax(result - upper, lower - result), 0.0)
         worst = _one_hot_min(-violation) * (ca.mmax(violation) > 0)
-        locked = _select(worst, ca.fmin(ca.fmax(result, lower), upper), locked)
-        free = free * (1.0 - worst)
-        result = acceleration(free, locked)
+        tried_locked = _select(worst, ca.fmin(ca.fmax(result, lower), upper), locked)
+        tried_free = free * (1.0 - worst)
+        tried, lost = acceleration(tried_free, tried_locked)
+        refused = ca.mmax(worst) * lost
+        kept = kept + refused * worst
+        take = ca.mmax(worst) * (1.0 - lost)
+        locked = ca.if_else(take, tried_locked, locked)
+        free = ca.if_else(take, tried_free, free)
+        result = ca.if_else(take, tried, result)
     return result
 
 
