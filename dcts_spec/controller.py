@@ -40,17 +40,12 @@ STATUS_LIMITS_RELAXED = 1
 STATUS_NONFINITE_INPUT = -1  # fallback torque
 STATUS_SOLVER_FAILED = -2  # fallback torque
 STATUS_INVALID_OUTPUT = -3  # the solution was not finite or broke a torque limit: fallback torque
-# A joint velocity beyond any the joint can reach (formulations.fallback.plausible_velocity): a sensor
-# fault, not a state to control (on a reading of 1000 rad/s the QP drove every torque to its limit).
-# (-4 and -5 are the C runtime's: not initialized, a NULL argument.)
-STATUS_IMPLAUSIBLE_INPUT = -6  # fallback torque
 STATUS_NAMES = {
     STATUS_OK: "ok",
     STATUS_LIMITS_RELAXED: "limits relaxed",
     STATUS_NONFINITE_INPUT: "non-finite input",
     STATUS_SOLVER_FAILED: "solver failed",
     STATUS_INVALID_OUTPUT: "invalid output",
-    STATUS_IMPLAUSIBLE_INPUT: "implausible input",
 }
 TORQUE_TOLERANCE = 1e-5  # relative to max(1, τ_max): what solver tolerances may leave (then clipped)
 # A row is active (binding) at the solution when it is this close to its bound, relative to
@@ -350,8 +345,6 @@ class Controller:
         param = self._ramp.advance()
         if not np.isfinite(np.concatenate((q, dq, tau_ext, ref))).all():
             return self._fallback(q, dq, STATUS_NONFINITE_INPUT, np.zeros(0))
-        if (np.abs(dq) > self._plausible_velocity).any():
-            return self._fallback(q, dq, STATUS_IMPLAUSIBLE_INPUT, np.zeros(0))
         self._last_q = q.copy()  # (q may be a view of the caller's array, which it may reuse)
         data = self._evaluate(q, dq, tau_ext, ref, param)
         x = np.zeros(0)

@@ -371,8 +371,6 @@ def status_text(name: str, big: str, takes_ref: bool, bound_rows: int, clips: bo
         ("-3", "INVALID_OUTPUT", "the solution was not finite or broke a torque limit"),
         ("-4", "NOT_INITIALIZED", f"{name}_init was not called or failed"),
         ("-5", "BAD_ARGUMENT", "ws, q, dq or tau is NULL: nothing was written"),
-        ("-6", "IMPLAUSIBLE_INPUT", "a joint velocity beyond any the joint can reach (10 x its velocity"),
-        ("", "", "limit, 100 rad/s or m/s without one): a sensor fault"),
     ]
     return table([(f"{code:>2}  {big}_STATUS_{label}" if label else "", text) for code, label, text in rows],
                  indent=" *  ")
