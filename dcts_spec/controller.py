@@ -35,7 +35,8 @@ from .validate import ValidationReport, validate_spec
 STATUS_OK = 0
 # a joint/Cartesian bound is crossed: its acceleration bound violated as little as the torque
 # limits allow, or the state already beyond its position or velocity limit (after a push; the
-# bound then brings it back)
+# bound then brings it back), or too close to a position limit for its speed: it crosses it during
+# this step whatever the torque (limits.viability.state_excess)
 STATUS_LIMITS_RELAXED = 1
 STATUS_NONFINITE_INPUT = -1  # fallback torque
 STATUS_SOLVER_FAILED = -2  # fallback torque

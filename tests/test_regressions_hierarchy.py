@@ -535,6 +535,27 @@ def test_beyond_its_envelope_the_braking_is_not_capped_by_the_acceleration_limit
     assert hi == pytest.approx(-a_max - 0.5 / DT, rel=1e-12) and lo == hi
 
 
+def test_a_step_during_which_a_position_limit_will_be_crossed_is_not_ok():
+    """Too close to its limit for its speed (a state that is no longer viable), a joint crosses it
+    during the step even stopping within it: that step was "ok" (the bounds' weakest form held)
+    and only the next, beyond the limit, said so (a Panda's joint 7 0.1 mrad from its limit at
+    2.4 rad/s; first seen from outside). Now the bound is named relaxed at once; a state with the
+    room to stop within the step is not."""
+    c = _controller(_bench_text())
+    q_max = np.radians(115.0)  # joint 6's (index 5) limit in the bench spec
+    for gap, speed, crossing in ((1e-4, 2.0, True), (0.5e-3, 0.9, False), (2e-3, 3.0, False)):
+        q, dq = BENCH_Q.copy(), np.zeros(7)
+        q[5], dq[5] = q_max - gap, speed
+        r = c.step(q, dq)
+        # the closed form: stopping within the step ends at q + v dt/2, the farthest it can stay short of
+        assert (q[5] + speed * DT / 2.0 > q_max) == crossing
+        assert ("joint:joint6" in r.relaxed) == crossing, (gap, speed, r.status, r.relaxed)
+        if crossing:
+            assert r.status == 1
+            a = _accel(c, q, dq, r.tau)  # Pinocchio: the position at the end of the step is beyond
+            assert q[5] + dq[5] * DT + 0.5 * a[5] * DT**2 > q_max
+
+
 def test_a_velocity_limit_lowered_at_run_time_is_reached_without_a_torque_kick():
     """The bench spec with a 20 rad/s² acceleration limit, its velocity limits run-time parameters,
     lowered to 0.1 rad/s (5 ms ramp) at t = 0.05 s while joint 3 turns at 0.6 rad/s (MuJoCo, the

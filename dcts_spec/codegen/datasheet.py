@@ -355,7 +355,8 @@ def status_text(name: str, big: str, takes_ref: bool, bound_rows: int, clips: bo
             ("1", "LIMITS_RELAXED", "a joint/Cartesian bound is crossed (those in info->relaxed): the torque"),
             ("", "", "limits cannot hold it, and it is violated as little as they allow (tasks"),
             ("", "", "come after); or the state is already beyond its position or velocity limit"),
-            ("", "", "(after a push), and the bound brings it back"),
+            ("", "", "(after a push), and the bound brings it back; or it is too close to a position"),
+            ("", "", "limit for its speed, and crosses it during this step whatever the torque"),
         ]
     else:
         rows = [

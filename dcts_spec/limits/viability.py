@@ -79,11 +79,18 @@ def _upper(x: Scalar, v: Scalar, x_max: Scalar, braking: Scalar, dt: float) -> B
     return ca.fmin(_upper_from_position(x, v, x_max, braking, dt), _upper_from_viability(x, v, x_max, braking, dt))
 
 
-def state_excess(x: Scalar, v: Scalar, x_min: Scalar, x_max: Scalar, v_max: Scalar) -> Bound:
+def state_excess(x: Scalar, v: Scalar, x_min: Scalar, x_max: Scalar, v_max: Scalar, dt: float) -> Bound:
     """How far the state is beyond [x_min, x_max] or |v| ≤ v_max, in the coordinate's own units
-    (the larger of the two; 0 within, and for a side without a limit)."""
+    (the larger of the two; 0 within, and for a side without a limit), or will be within this
+    period whatever the acceleration: moving toward a position bound too fast for the room left,
+    it crosses by x + v dt/2 − x_max even stopping within the step, the hardest braking the bounds
+    above ever ask for (their weakest form, in a state that is no longer viable). A viable state
+    has room for that (≥ v²/2b + v dt/2), so this is 0 in a closed loop that holds its bounds;
+    without it such a step was "ok" and the bound crossed during it (a Panda's joint 7 0.1 mrad
+    from its limit at 2.4 rad/s: 1.2 mrad beyond it one step later)."""
     excess = ca.SX(0.0)
-    for beyond, limited in ((x - x_max, _limited(x_max)), (x_min - x, _limited(x_min)),
+    for beyond, limited in ((x + ca.fmax(v, 0.0) * dt / 2.0 - x_max, _limited(x_max)),
+                            (x_min - x - ca.fmin(v, 0.0) * dt / 2.0, _limited(x_min)),
                             (ca.fabs(v) - v_max, _limited(v_max))):
         if limited:
             excess = ca.fmax(excess, beyond)
