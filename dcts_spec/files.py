@@ -34,6 +34,9 @@ _KIND_MARKERS = (("campaign.json", "campaign"), ("manifest.json", "bundle"), ("c
 # A staging folder this old was left by a run that was killed (SIGKILL, a power cut): a live run
 # finishes its staging in minutes, and a younger one may belong to a run still going.
 STALE_STAGING_SECONDS = 3600.0
+# In every staging folder from its creation until it is installed: what lets a later run remove
+# one a killed run left behind (a folder of the same name without it is someone else's)
+STAGING_MARK = ".dcts-staging"
 # The signal that asked this process to stop (see `request_stop`), or None
 _stop_signal: int | None = None
 
@@ -142,6 +145,7 @@ def install(staging: Path, folder: Path, kind: str, regenerated: tuple[str, ...]
     if _stop_signal is not None:
         raise SystemExit(128 + _stop_signal)
     staging, folder = Path(staging), Path(folder)
+    (staging / STAGING_MARK).unlink(missing_ok=True)  # (an output now, not a leftover)
     new = sorted(p.name for p in staging.iterdir() if p.name != OWNED)
     paths = [p for p in _paths(staging) if p != OWNED]
     (staging / OWNED).write_text(json.dumps({"kind": kind, "entries": new, "paths": paths}) + "\n")
@@ -205,7 +209,7 @@ def install_files(staging: Path, folder: Path, previous: set[str]) -> None:
     owned = _owned(folder)
     state = owned if isinstance(owned, dict) else {"entries": sorted(_names(owned))}
     old = set(state.get("paths", [])) | previous
-    new = [p for p in _paths(staging) if (staging / p).is_file()]
+    new = [p for p in _paths(staging) if (staging / p).is_file() and p != STAGING_MARK]
     users = [p for p in new if (folder / p).exists() and p not in old]
     if users:
         shown = ", ".join(users[:5]) + (f" and {len(users) - 5} more" if len(users) > 5 else "")
@@ -232,15 +236,30 @@ def _parents(path: str) -> list[str]:
     return ["/".join(parts[: i + 1]) for i in range(len(parts))]
 
 
+def check_new_file(path: Path, what: str) -> None:
+    """A single file dcts is to write (`what`: "the video"): refused if anything is at `path`
+    already, the user's or an earlier run's alike (dcts cannot tell them apart)."""
+    if path.exists() or path.is_symlink():
+        raise OutputFolderError(f"{path} exists: {what} is not written over it (dcts never deletes or overwrites "
+                                "files); remove it, or choose another name")
+
+
+def mark_staging(folder: Path) -> None:
+    """Mark `folder`, just made to stage an output in, as dcts's (STAGING_MARK)."""
+    (folder / STAGING_MARK).touch()
+
+
 def remove_stale_staging(parent: Path, prefix: str, suffix: str = "") -> None:
-    """Remove the staging folders `parent/<prefix>*<suffix>` older than STALE_STAGING_SECONDS:
-    names only dcts makes, next to an output it is about to write, left by a killed run."""
+    """Remove the staging folders `parent/<prefix>*<suffix>` older than STALE_STAGING_SECONDS that
+    dcts marked as its own (`mark_staging`), next to an output it is about to write, left by a
+    killed run. A folder of such a name without the mark is a user's, and stays."""
     if not parent.is_dir():
         return
     now = time.time()
     for path in parent.glob(f"{prefix}*{suffix}"):
         try:
-            if path.is_dir() and not path.is_symlink() and now - path.stat().st_mtime > STALE_STAGING_SECONDS:
+            if (path.is_dir() and not path.is_symlink() and (path / STAGING_MARK).is_file()
+                    and now - path.stat().st_mtime > STALE_STAGING_SECONDS):
                 shutil.rmtree(path, ignore_errors=True)
         except OSError:
             pass

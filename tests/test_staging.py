@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 
 from dcts_spec import cli, files
-from dcts_spec.files import STALE_STAGING_SECONDS, install, remove_stale_staging
+from dcts_spec.files import STALE_STAGING_SECONDS, install, mark_staging, remove_stale_staging
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -56,14 +56,30 @@ def test_after_a_stop_request_nothing_is_installed_and_the_command_exits_with_th
 
 
 def test_the_next_run_removes_only_old_staging_folders_of_its_output(tmp_path):
+    """Only dcts's own (marked) staging folders: a user's old `.bundle.tmp-backup` with their
+    thesis in it matched the name and was deleted by the next `dcts compile -o bundle` (first
+    seen from outside)."""
     old, young = tmp_path / ".bundle.tmp-old", tmp_path / ".bundle.tmp-young"
     other, user = tmp_path / ".other.tmp-old", tmp_path / "bundle.tmp-notes"
-    for folder in (old, young, other, user):
+    backup = tmp_path / ".bundle.tmp-backup"  # the name of a staging folder, a user's folder
+    for folder in (old, young, other, user, backup):
         folder.mkdir()
         (folder / "file").write_text("x")
+        if folder is not backup:
+            mark_staging(folder)
     past = time.time() - 2 * STALE_STAGING_SECONDS
-    for folder in (old, other, user):
+    for folder in (old, other, user, backup):
         os.utime(folder, (past, past))
     remove_stale_staging(tmp_path, ".bundle.tmp-")
     assert not old.exists()
     assert young.exists() and other.exists() and user.exists()  # a live run's, another output's, a user's
+    assert (backup / "file").read_text() == "x"
+
+
+def test_an_installed_output_has_no_staging_mark(tmp_path):
+    staging = tmp_path / ".out.tmp-1"
+    staging.mkdir()
+    mark_staging(staging)
+    (staging / "file").write_text("x")
+    install(staging, tmp_path / "out", "run")
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == [".dcts-owned", "file"]

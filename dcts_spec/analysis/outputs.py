@@ -8,7 +8,7 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
-from ..files import check_writable, install, remove_stale_staging
+from ..files import check_writable, install, mark_staging, remove_stale_staging
 from .plots import write_plots
 from .run import RunResult
 
@@ -31,6 +31,7 @@ def atomic_directory(path: Path, kind: str) -> Iterator[Path]:
     # mkdir, not mkdtemp: the folder gets the user's usual permissions.
     staging = path.parent / f".{path.name}.{secrets.token_hex(6)}.partial"
     staging.mkdir()
+    mark_staging(staging)
     try:
         yield staging
         install(staging, path, kind)

@@ -19,8 +19,8 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
-from ..files import (OutputFolderError, check_writable, claim, install_files, lists_paths, owned_names,
-                     remove_stale_staging)
+from ..files import (OutputFolderError, check_writable, claim, install_files, lists_paths, mark_staging,
+                     owned_names, remove_stale_staging)
 from ..spec.errors import Diagnostic, SpecError, shown
 
 STATE = "campaign.json"
@@ -128,6 +128,7 @@ class ResultsFolder:
         remove_stale_staging(parent, f".{self.folder.name}.", ".report")
         staging = parent / f".{self.folder.name}.{secrets.token_hex(6)}.report"
         staging.mkdir()
+        mark_staging(staging)
         try:
             yield staging
             install_files(staging, self.folder, self._earlier_report())

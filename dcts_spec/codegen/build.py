@@ -23,7 +23,7 @@ from functools import lru_cache
 from pathlib import Path
 
 from ..choices import TARGETS
-from ..files import OutputFolderError, check_writable, install, remove_stale_staging
+from ..files import OutputFolderError, check_writable, install, mark_staging, remove_stale_staging
 from ..phases import building_controller, phase
 from ..controller import Controller
 from ..robot.model import Robot
@@ -460,6 +460,7 @@ def compile_bundle(
         umask = os.umask(0)
         os.umask(umask)
         os.chmod(tmp, 0o777 & ~umask)  # mkdtemp makes it private; the bundle is an ordinary folder
+        mark_staging(tmp)
     except OSError as exc:
         _remove_created(created)
         raise CodegenError(f"cannot write into {out_dir.parent}: {exc.strerror}") from None
