@@ -19,7 +19,7 @@ from .analysis.compare import markdown_table, write_comparison
 from .analysis.outputs import atomic_directory, earlier_output, write_run
 from .analysis.report import describe
 from .analysis.run import RunResult, analyze
-from .files import OutputFolderError, check_writable
+from .files import OutputFolderError, check_new_file, check_writable
 from .formulations import FORMULATIONS
 from .phases import building_controller, phase
 from .sim.progress import ProgressBar
@@ -72,6 +72,8 @@ def _simulate(file: Path, out: Path | None, options: RunOptions, formulation: st
               plots: bool, viewer: bool, video: Path | None) -> None:
     spec = _load(file, options, [formulation] if formulation else [])
     out = _output_directory(out, RESULTS_DIR / spec.name, "run")
+    if video is not None:  # (before the run: a video over the spec itself was written after it)
+        check_new_file(video, "the video")
     with ExitStack() as stack:
         sim = _prepare(spec, options, formulation, stack)
         hooks = []

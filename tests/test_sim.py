@@ -584,6 +584,22 @@ def test_video_without_encoder_says_so(tmp_path: Path, monkeypatch: pytest.Monke
     assert not (tmp_path / "out").exists() and not (tmp_path / "run.mp4").exists()
 
 
+@pytest.mark.parametrize("target", ["spec", "video"])
+def test_a_video_is_never_written_over_a_file(tmp_path: Path, capsys: pytest.CaptureFixture, target: str) -> None:
+    """--video moved the finished video over whatever was at its path: a user's holiday.mp4, the
+    spec itself (first seen from outside). Refused before the run, nothing written."""
+    spec = tmp_path / "s.yaml"
+    spec.write_text(spec_text("  duration: 0.02\n"))
+    video = spec if target == "spec" else tmp_path / "holiday.mp4"
+    if target == "video":
+        video.write_bytes(b"the user's")
+    before = video.read_bytes()
+    code = simulate_command(spec, tmp_path / "out", RunOptions(runtime="python", quiet=True), video=video)
+    assert code == 1
+    assert f"{video} exists: the video is not written over it" in capsys.readouterr().err
+    assert video.read_bytes() == before and not (tmp_path / "out").exists()
+
+
 @pytest.mark.slow
 def test_video_is_rendered_where_possible(tmp_path: Path) -> None:
     spec = tmp_path / "s.yaml"
