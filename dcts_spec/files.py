@@ -18,6 +18,7 @@ report with `install_files`, which keeps its samples and whatever else is there.
 from __future__ import annotations
 
 import json
+import os
 import secrets
 import shutil
 import time
@@ -117,6 +118,13 @@ def check_writable(folder: Path, kind: str, allow_unmarked=lambda folder: False)
     folder = Path(folder)
     if folder.exists() and not folder.is_dir():
         raise OutputFolderError(f"{folder} exists and is not a directory")
+    if folder.is_symlink() and not folder.exists():
+        raise OutputFolderError(f"{folder} is a link to nothing ({os.readlink(folder)}): choose another output folder")
+    ancestor = next(p for p in folder.absolute().parents if p.exists())  # (the first folder that would be made in)
+    if not folder.exists() and not ancestor.is_dir():
+        raise OutputFolderError(f"cannot create {folder}: {ancestor} is not a directory")
+    if not folder.exists() and not os.access(ancestor, os.W_OK | os.X_OK):
+        raise OutputFolderError(f"cannot create {folder}: {ancestor} is not writable")
     if folder.is_dir() and any(folder.iterdir()) and not (folder / OWNED).is_file() and not allow_unmarked(folder):
         raise OutputFolderError(f"{folder} is not empty and was not written by dcts (it has no {OWNED}): refusing "
                                 "to write into it; choose another output folder (dcts never deletes files it did not write)")

@@ -13,7 +13,8 @@ from pathlib import Path
 import pytest
 
 from dcts_spec import cli, files
-from dcts_spec.files import STALE_STAGING_SECONDS, install, mark_staging, remove_stale_staging
+from dcts_spec.files import (STALE_STAGING_SECONDS, OutputFolderError, check_writable, install, mark_staging,
+                             remove_stale_staging)
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -83,3 +84,18 @@ def test_an_installed_output_has_no_staging_mark(tmp_path):
     (staging / "file").write_text("x")
     install(staging, tmp_path / "out", "run")
     assert sorted(p.name for p in (tmp_path / "out").iterdir()) == [".dcts-owned", "file"]
+
+
+def test_an_output_folder_that_cannot_be_made_is_refused_before_the_run(tmp_path):
+    """-o below a file, or a link to nothing, failed with an internal error (exit 3) after the
+    whole simulation (first seen from outside); now check_writable, which every command runs
+    before its work, says why."""
+    (tmp_path / "notes.txt").write_text("x")
+    (tmp_path / "dangling").symlink_to(tmp_path / "nowhere")
+    for folder, words in ((tmp_path / "notes.txt" / "run", "notes.txt is not a directory"),
+                          (tmp_path / "notes.txt" / "a" / "b", "notes.txt is not a directory"),
+                          (tmp_path / "dangling", "is a link to nothing")):
+        with pytest.raises(OutputFolderError, match=words):
+            check_writable(folder, "run")
+    check_writable(tmp_path / "new" / "run", "run")  # made later, in a folder that can be made
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["dangling", "notes.txt"]

@@ -8,7 +8,7 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
-from ..files import check_writable, install, mark_staging, remove_stale_staging
+from ..files import OutputFolderError, check_writable, install, mark_staging, remove_stale_staging
 from .plots import write_plots
 from .run import RunResult
 
@@ -26,12 +26,14 @@ def atomic_directory(path: Path, kind: str) -> Iterator[Path]:
     `path` was not written by dcts, or holds another kind of output."""
     path = Path(path)
     check_writable(path, kind, allow_unmarked=earlier_output)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    remove_stale_staging(path.parent, f".{path.name}.", ".partial")
-    # mkdir, not mkdtemp: the folder gets the user's usual permissions.
     staging = path.parent / f".{path.name}.{secrets.token_hex(6)}.partial"
-    staging.mkdir()
-    mark_staging(staging)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        remove_stale_staging(path.parent, f".{path.name}.", ".partial")
+        staging.mkdir()  # (mkdir, not mkdtemp: the folder gets the user's usual permissions)
+        mark_staging(staging)
+    except OSError as error:  # (what check_writable cannot tell beforehand: a read-only file system, /proc)
+        raise OutputFolderError(f"cannot write into {path.parent}: {error.strerror}") from None
     try:
         yield staging
         install(staging, path, kind)

@@ -65,7 +65,10 @@ class ResultsFolder:
         the rows already finished, by sample index (of the campaign's `samples`)."""
         self.check()
         state_file = self.folder / STATE
-        self.folder.mkdir(parents=True, exist_ok=True)
+        try:
+            self.folder.mkdir(parents=True, exist_ok=True)
+        except OSError as error:  # (what check_writable cannot tell beforehand: a read-only file system)
+            raise OutputFolderError(f"cannot create {self.folder}: {error.strerror}") from None
         claim(self.folder, "campaign", NAMES)  # (an older dcts's OWNED lists no report files: _earlier_report)
         state_file.write_text(json.dumps(self.state, indent=2) + "\n")
         return self._finished(samples)
