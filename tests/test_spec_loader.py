@@ -461,3 +461,14 @@ def test_closed_sets_match_what_the_compiler_offers():
     assert set(typing.get_args(Formulation)) == set(FORMULATIONS)
     robots = typing.get_args(RobotSpec.model_fields["model"].annotation)
     assert {r for arg in robots for r in typing.get_args(arg)} == set(BUILTIN_ROBOTS)
+
+
+@pytest.mark.parametrize("name", ["api", "daqp", "Utils", "types"])
+def test_a_spec_named_like_a_daqp_file_is_refused(name: str) -> None:
+    """`name: api` validated, and the bundle's api.h then shadowed DAQP's: the C did not compile
+    (first seen from outside)."""
+    text = (Path(__file__).resolve().parents[1] / "specs" / "minimal.yaml").read_text()
+    with pytest.raises(SpecError) as caught:
+        load_spec_text(text.replace("name: minimal", f"name: {name}"))
+    assert "is the name of one of DAQP's C files" in str(caught.value) and ":4:" in str(caught.value)
+    load_spec_text(text.replace("name: minimal", "name: api_arm"))

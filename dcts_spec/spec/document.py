@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
-from pydantic import BeforeValidator, ConfigDict, Field, PrivateAttr
+from pydantic import AfterValidator, BeforeValidator, ConfigDict, Field, PrivateAttr
 
 from .controller import ControllerSpec
 from .limits import LimitsSpec
@@ -21,6 +21,20 @@ def _not_a_boolean(value: Any) -> Any:
     """`version: true` is not version 1 (Python's True == 1 would pass the literal)."""
     if isinstance(value, bool):
         raise ValueError(f"expected the number 1, got {str(value).lower()}")
+    return value
+
+
+# The bundle's <name>.h and <name>.c sit next to the DAQP sources it compiles, whose files
+# include each other by these names: a spec named like one shadowed DAQP's header, and the C did
+# not compile (`name: api`; first seen from outside). Case-insensitive file systems included.
+DAQP_FILE_NAMES = ("api", "auxiliary", "avi", "bnb", "constants", "daqp", "daqp_prox", "eq_elim", "factorization",
+                   "hierarchical", "presolve", "types", "utils")
+
+
+def _not_a_daqp_file(value: Any) -> Any:
+    if isinstance(value, str) and value.lower() in DAQP_FILE_NAMES:
+        raise ValueError(f"{value!r} is the name of one of DAQP's C files, which the bundle compiles next to its own; "
+                         f"choose another (reserved: {', '.join(DAQP_FILE_NAMES)})")
     return value
 
 
@@ -41,7 +55,7 @@ class Spec(StrictModel):
     }]})
 
     version: Annotated[Literal[1], BeforeValidator(_not_a_boolean)] = Field(description="spec language version; 1 is the only one", examples=[1])
-    name: str = Field(
+    name: Annotated[str, AfterValidator(_not_a_daqp_file)] = Field(
         pattern=r"^[A-Za-z_][A-Za-z0-9_]*$",
         max_length=64,
         description="identifier (letters, digits, _; at most 64 characters); prefixes the generated C symbols "
