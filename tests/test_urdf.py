@@ -8,13 +8,14 @@ from xml.etree import ElementTree
 import casadi as ca
 import numpy as np
 import pinocchio as pin
+import pytest
 
 from dcts_spec.controller import build_controller
 from dcts_spec.limits.naming import joint_bound_text
 from dcts_spec.robot.describe import describe
 from dcts_spec.robot.model import JointLimits
 from dcts_spec.robot.urdf import build_model, revolute_from_continuous
-from dcts_spec.spec import load_spec
+from dcts_spec.spec import SpecError, load_spec
 from dcts_spec.validate import validate_spec
 
 INERTIAL = """<inertial><origin xyz="0.05 0.01 0.2"/><mass value="{m}"/>
@@ -154,3 +155,21 @@ def test_a_joint_whose_urdf_range_is_empty_has_no_position_limits(tmp_path):
     report = validate_spec(load_spec(spec))
     assert np.array_equal(report.robot.limits.q_max, [1.0, 1.0])
     assert not [d for d in report.diagnostics if "no position range" in d.message]
+
+
+def test_a_joint_whose_urdf_limits_are_inverted_is_an_error(tmp_path):
+    """<limit lower="1" upper="-1"> validated (the summary read q ∈ [57.3, -57.3] deg), and building
+    the controller then failed with "high - low < 0" (first seen from outside)."""
+    from dcts_spec.robot.builtin import example_robot_data_dir
+
+    source = example_robot_data_dir() / "double_pendulum_description" / "urdf" / "double_pendulum.urdf"
+    text = source.read_text()
+    old = 'lower="0"\n      upper="0"'
+    assert old in text, "example-robot-data's double pendulum changed: update this test"
+    urdf = tmp_path / "pendulum.urdf"
+    urdf.write_text(text.replace(old, 'lower="1"\n      upper="-1"', 1))
+    spec = tmp_path / "pendulum.yaml"
+    spec.write_text(PENDULUM.format(urdf=urdf, limits=""))
+    with pytest.raises(SpecError) as caught:
+        validate_spec(load_spec(spec))
+    assert "the URDF gives joint1 (1 > -1) a lower position limit above its upper one" in str(caught.value)

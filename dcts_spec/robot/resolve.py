@@ -42,6 +42,12 @@ def resolve_robot(spec: Spec) -> tuple[Robot, list[Diagnostic]]:
     _check_moved_inertia(spec, model, diags)
     _add_frames(spec, model, diags)
     urdf_limits = JointLimits.of_model(model)
+    inverted = [f"{model.names[j]} ({lo:.6g} > {hi:.6g})" for j in range(1, model.njoints)
+                for lo, hi in [(model.lowerPositionLimit[model.joints[j].idx_q], model.upperPositionLimit[model.joints[j].idx_q])]
+                if lo > hi]
+    if inverted:  # (validate said ok, and building the controller failed with "high - low < 0")
+        diags.append(src.diagnostic(("robot",), f"the URDF gives {', '.join(inverted)} a lower position limit above "
+                                                "its upper one; correct its <limit lower=... upper=...>"))
     empty = no_position_range(model)
     rangeless = [model.names[j] for j in range(1, model.njoints) if empty[model.joints[j].idx_q]]
     if rangeless and not spec.limits.joint_position:
