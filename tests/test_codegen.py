@@ -472,6 +472,20 @@ def test_builtin_robot_spec_copied_as_is(built, three_levels_spec):
     assert not (out / "robot").exists()
 
 
+@pytest.mark.parametrize("kind", ["missing", "empty", "a file"])
+def test_a_daqp_source_that_is_not_one_is_refused_before_anything(tmp_path, kind):
+    """--daqp-src /nonexistent gave a bundle without DAQP (exit 0 with --no-build), and a build
+    error about api.h without (first seen from outside)."""
+    source = tmp_path / "daqp"
+    if kind == "empty":
+        source.mkdir()
+    elif kind == "a file":
+        source.write_text("x")
+    with pytest.raises(CodegenError, match="not DAQP's C sources"):
+        compile_bundle(MINIMAL, tmp_path / "out", build=False, daqp_src=source)
+    assert not (tmp_path / "out").exists()
+
+
 def test_broken_spec_leaves_nothing(tmp_path):
     broken = tmp_path / "broken.yaml"
     broken.write_text(MINIMAL.read_text().replace("priority: 1", "priority: 0"))

@@ -44,6 +44,14 @@ FIRMWARE_FLASH_BYTES = 4 * 1024 * 1024  # the flash the image is linked for (fir
 # -- toolchain -------------------------------------------------------------------------------------
 
 
+def check_daqp_source(path: Path) -> None:
+    """A --daqp-src folder must hold DAQP's C sources as its csrc/ does (include/, src/): an empty
+    or wrong folder gave a bundle without them, and a build error about api.h."""
+    if not ((path / "include" / "api.h").is_file() and (path / "src" / "api.c").is_file()):
+        raise CodegenError(f"--daqp-src {path}: not DAQP's C sources (expected include/api.h and src/api.c, as in "
+                           "the csrc/ folder of DAQP's source distribution)")
+
+
 def daqp_sources(cache: Path | None = None, version: str = DAQP_VERSION) -> Path:
     """DAQP's C sources (csrc/ with include/ and src/) from its PyPI source distribution,
     downloaded once into the cache with pip (never into the project). Downloaded and unpacked in
@@ -450,6 +458,8 @@ def compile_bundle(
     if out_dir.name in ("", ".", ".."):
         raise CodegenError(f"invalid output directory {out_dir}")
     _check_output(out_dir)
+    if daqp_src:
+        check_daqp_source(Path(daqp_src))
     spec_obj, spec_bytes = _load(spec)
     controller, model = _controller_and_model(spec_obj, formulation, robot, model_changes)
 
