@@ -24,7 +24,7 @@ from command_line import MINIMAL, ROOT, invoke
 from dcts_spec.campaign import SweepOptions, load_campaign_text, sweep, tune
 from dcts_spec.campaign.engine import RayPool
 from dcts_spec.campaign.report import save_json, summary_lines, worst_cases
-from dcts_spec.campaign.results import NAMES
+from dcts_spec.campaign.results import NAMES, ResultsFolder
 from dcts_spec.files import OWNED
 from dcts_spec.campaign.runner import CampaignInputs, SampleRunner, metric_columns
 from dcts_spec.campaign.sampling import Sampler
@@ -410,6 +410,21 @@ def test_a_changed_campaign_is_refused_at_its_file(spec_file, campaign_file, ser
     assert len(_rows(serial_run.folder)) == 6  # nothing written
 
 
+def test_a_campaign_that_stopped_before_any_sample_starts_again_with_the_changed_file(spec_file, campaign_file,
+                                                                                      tmp_path) -> None:
+    """A campaign that crashed at its start (an overflowing range, since refused) left campaign.json
+    alone, and the corrected file was refused as "changed since": the folder had to be removed by
+    hand (first seen from outside). With no sample, nothing is lost by starting again."""
+    out = tmp_path / "out"
+    folder = ResultsFolder(out, spec_file, campaign_file, {"mode": "sweep"})
+    folder.open(6)  # (what a run records before its first sample)
+    changed = tmp_path / "campaign.yaml"
+    changed.write_text(CAMPAIGN.replace("samples: 6", "samples: 1"))
+    result = invoke("sweep", str(spec_file), "--campaign", str(changed), "-o", str(out), "--serial", "--no-plots", "-q")
+    assert result.exit_code == 0, result.output
+    assert len(_rows(out)) == 1 and json.loads((out / "campaign.json").read_text())["campaign"] == str(changed)
+
+
 @pytest.mark.parametrize(("line", "words"), [
     ('{"index": 2, "seed": 1, "status": "ok"', "not a JSON object"),  # (garbled in the middle)
     ('{"index": 99, "seed": 1, "status": "ok"}', "its index 99 is not a sample of this campaign (0 to 5)"),
@@ -608,3 +623,12 @@ def test_the_report_gives_each_column_its_unit(serial_run) -> None:
     assert any(line.startswith("  worst primary_rms_error = ") and " m (sample " in line for line in lines), lines
     assert labelled("pushes[0].force.magnitude", units) == "pushes[0].force.magnitude [N]"
     assert labelled("model_mismatch.mass_scale", {"model_mismatch.mass_scale": "1"}) == "model_mismatch.mass_scale"
+
+
+def test_a_range_wider_than_a_double_is_an_error_at_it() -> None:
+    """{uniform: [-1e308, 1e308]} crashed the campaign with an OverflowError (first seen from outside)."""
+    text = CAMPAIGN.replace("offset: {uniform: [-3, 3]}", "offset: {uniform: [-1e308, 1e308]}")
+    with pytest.raises(SpecError) as caught:
+        load_campaign_text(text, "c.yaml")
+    assert any(str(d).startswith("c.yaml:") and "is wider than a double can hold" in str(d)
+               for d in caught.value.diagnostics), str(caught.value)

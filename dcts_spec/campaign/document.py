@@ -12,6 +12,8 @@ what is allowed.
 
 from __future__ import annotations
 
+import math
+
 from pathlib import Path
 from typing import Annotated, Any, Literal, get_args
 
@@ -59,6 +61,8 @@ class Distribution(StrictModel):
         low_high = self.uniform or self.loguniform
         if low_high is not None and not low_high[0] < low_high[1]:
             raise ValueError(f"low {low_high[0]:g} must be below high {low_high[1]:g}")
+        if low_high is not None and not math.isfinite(low_high[1] - low_high[0]):  # (the draw overflowed)
+            raise ValueError(f"[{low_high[0]:g}, {low_high[1]:g}] is wider than a double can hold: narrow it")
         if self.loguniform is not None and not self.loguniform[0] > 0:
             raise ValueError(f"loguniform needs a positive low, got {self.loguniform[0]:g}")
         if self.normal is not None and self.normal[1] < 0:

@@ -55,7 +55,11 @@ class ResultsFolder:
         check_writable(self.folder, "campaign")
         state_file = self.folder / STATE
         if state_file.is_file():
-            self._check_same(json.loads(state_file.read_text()))
+            # a campaign that stopped before any result (a crash at its start) has nothing the
+            # changed files' samples would be compared with: it starts again
+            if any((self.folder / name).is_file() and (self.folder / name).stat().st_size
+                   for name in (SAMPLES, JOURNAL, TRIALS)):
+                self._check_same(json.loads(state_file.read_text()))
         elif owned_names(self.folder):
             raise OutputFolderError(f"{self.folder} holds another dcts output (no {STATE}): choose another output "
                                     "folder for the campaign")
