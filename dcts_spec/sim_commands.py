@@ -28,6 +28,7 @@ from .sim.runtime import RUNTIMES, RuntimeUnavailable
 from .sim.video import VideoRecorder, VideoUnavailable
 from .sim.viewer import LiveViewer, ViewerUnavailable
 from .spec import Spec, SpecError, load_spec
+from .spec.scenario import run_steps_problem
 
 RESULTS_DIR = Path("runs")
 
@@ -135,7 +136,10 @@ def _load(file: Path, options: RunOptions, formulations: list[str]) -> Spec:
         raise CommandError(f"unknown formulation {unknown[0]!r}; choose one of {', '.join(FORMULATIONS)}")
     if options.duration is not None and options.duration <= 0:
         raise CommandError(f"--duration must be positive, got {options.duration:g}")
-    return load_spec(file)
+    spec = load_spec(file)
+    if options.duration is not None and (problem := run_steps_problem(options.duration, spec.controller.period)):
+        raise CommandError(f"--duration {problem}")
+    return spec
 
 
 def _output_directory(out: Path | None, default: Path, kind: str) -> Path:

@@ -16,6 +16,7 @@ from .robot.model import Robot
 from .robot.resolve import frame_candidates, resolve_robot
 from .spec import Diagnostic, Spec, SpecError, load_spec
 from .spec.errors import did_you_mean
+from .spec.scenario import run_steps_problem
 from .spec.tasks import TaskSpec
 from .spec.types import size_of
 from .spec.units import joint_to_si, to_si
@@ -325,6 +326,8 @@ def _check_scenario(spec: Spec, robot: Robot) -> list[Diagnostic]:
     if sc is None:
         return diags
     at = ("scenario",)
+    if (problem := run_steps_problem(sc.duration, spec.controller.period)) is not None:
+        diags.append(src.diagnostic(at + ("duration",), problem))
     for name in ("initial_q", "initial_dq"):
         value = getattr(sc, name)
         if value is not None and len(value) != n:

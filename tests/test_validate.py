@@ -465,3 +465,20 @@ scenario:
     assert any(line == 11 and "push starts at 5 s, not before the run ends" in m for line, m in warnings), warnings
     assert any(line == 14 and "parameter change comes at 5 s" in m for line, m in warnings), warnings
     assert not any(line == 12 for line, _ in warnings)
+
+
+def test_a_run_with_more_steps_than_a_log_keeps_is_an_error(tmp_path: Path) -> None:
+    """A 1e-5 s period and a 10,000 s run, each allowed, validated: the log then asked for 7.5 GB or
+    more (first seen from outside). The spec's duration and --duration are held to 10⁷ steps."""
+    text = (ROOT / "specs" / "minimal.yaml").read_text().replace("duration: 2.0", "duration: 10000")
+    spec = tmp_path / "long.yaml"
+    spec.write_text(text + "controller: {period: 1.0e-5}\n")
+    result = dcts("validate", str(spec))
+    assert result.returncode == 1
+    assert "scenario.duration: 10000 s at a period of 1e-05 s is 1e+09 control steps" in result.stderr
+    spec.write_text(text.replace("duration: 10000", "duration: 0.1") + "controller: {period: 1.0e-5}\n")
+    result = dcts("simulate", str(spec), "--duration", "200", "-o", str(tmp_path / "out"))
+    assert result.returncode == 1 and "--duration 200 s at a period of 1e-05 s" in result.stderr
+    assert not (tmp_path / "out").exists()
+    spec.write_text(text)  # the longest run at the default period
+    assert dcts("validate", str(spec)).returncode == 0

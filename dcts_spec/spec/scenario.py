@@ -94,6 +94,21 @@ class ParameterChange(StrictModel):
         examples=[{"tool_position.kp": 400, "tool_position.activation": 0}])
 
 
+# A run's log keeps every control step (~0.5 kB each for a 7-joint arm): 10⁷ is the longest
+# duration at the default period. A 1e-5 s period with the longest duration asked for 10⁹ steps,
+# and the log for 7.5 GB or more (first seen from outside).
+MAX_RUN_STEPS = 10_000_000
+
+
+def run_steps_problem(duration: float, period: float) -> str | None:
+    """What is wrong with a run of `duration` at `period`, if it has too many steps."""
+    steps = duration / period
+    if steps <= MAX_RUN_STEPS:
+        return None
+    return (f"{duration:g} s at a period of {period:g} s is {steps:.3g} control steps, more than a run's log keeps "
+            f"({MAX_RUN_STEPS:.0e}): at most {MAX_RUN_STEPS * period:g} s at this period")
+
+
 class ScenarioSpec(StrictModel):
     """A simulated run: its length, start, disturbances, payloads, waypoints and sensing."""
 
