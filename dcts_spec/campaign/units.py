@@ -22,12 +22,12 @@ def variable_unit(path: KeyPath, robot: Robot, campaign: Campaign, parameter_uni
     """The unit of the swept value at `path` in the campaign file (a per-joint entry's: its joint's;
     a value drawn for every joint: theirs, combined)."""
     section = path[0]
-    joint = path[-1] if isinstance(path[-1], int) and section != "pushes" and section != "payloads" else None
-    joints = range(robot.nv) if joint is None else [joint]
     if section == "pushes":
         return PUSH_UNITS[str(path[2])]
     if section == "payloads":
         return PAYLOAD_UNITS[str(path[2])]
+    joint = path[-1] if isinstance(path[-1], int) else None  # (a per-joint entry)
+    joints = range(robot.nv) if joint is None else [joint]
     if section == "model_mismatch":
         return "1"
     if section == "external_torque":
