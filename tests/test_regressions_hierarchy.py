@@ -556,6 +556,42 @@ def test_a_step_during_which_a_position_limit_will_be_crossed_is_not_ok():
             assert q[5] + dq[5] * DT + 0.5 * a[5] * DT**2 > q_max
 
 
+@pytest.mark.parametrize("robot", ["iiwa14", "panda", "ur5"])
+def test_an_ok_step_keeps_every_joint_within_its_position_limits_during_the_step(robot):
+    """Random states near a position limit, moving toward it at up to the velocity limit, from
+    room to spare to far too little (1e-6 to 1e-2 rad): whenever a step says "ok", the joint's
+    position over the step under the returned torque (Pinocchio's dynamics, the acceleration
+    constant over the period) stays within its limits; the states that cannot stay within it
+    say "limits relaxed". (Under the 10 rad/s² acceleration limit an iiwa14's joint 3 0.6 mrad from
+    its limit at 0.8 rad/s crossed it during an "ok" step.)"""
+    base = spec_text("X", "  - {name: damping, type: joint, priority: 1, gains: {kp: 0, kd: 2}}",
+                     limits="  joint_acceleration: {max: 10}", name=f"room_{robot}")
+    key, line = ("urdf", UR5_URDF) if robot == "ur5" else ("model", robot)
+    c = _controller(base.replace("robot: {model: X}", f"robot: {{{key}: {line}}}"))
+    lim = c.robot.limits
+    rng = np.random.default_rng(5)
+    seen = {0: 0, 1: 0}
+    for q, dq in _random_states(c, 150, seed=13):
+        q = np.clip(q, lim.q_min + 0.3, lim.q_max - 0.3)
+        dq = np.clip(dq, -0.5 * lim.v_max, 0.5 * lim.v_max)
+        j = int(rng.integers(c.n))
+        gap, speed = 10.0 ** rng.uniform(-6, -2), rng.uniform(0.05, 1.0) * lim.v_max[j]
+        upper = rng.random() < 0.5
+        q[j], dq[j] = (lim.q_max[j] - gap, speed) if upper else (lim.q_min[j] + gap, -speed)
+        r = c.step(q, dq)
+        assert r.status in (0, 1), r.status
+        seen[r.status] += 1
+        if r.status == 1:
+            continue
+        a = _accel(c, q, dq, r.tau)
+        t = np.linspace(0.0, DT, 101)
+        path = q[:, None] + dq[:, None] * t + 0.5 * a[:, None] * t**2
+        tolerance = dcts_spec.controller.STATE_TOLERANCE  # (rad: what the status allows the state beyond)
+        assert np.all(path <= lim.q_max[:, None] + tolerance) and np.all(path >= lim.q_min[:, None] - tolerance), \
+            (j, gap, speed)
+    assert seen[0] >= 20 and seen[1] >= 20, seen  # (both kinds of state were tried)
+
+
 def test_a_velocity_limit_lowered_at_run_time_is_reached_without_a_torque_kick():
     """The bench spec with a 20 rad/s² acceleration limit, its velocity limits run-time parameters,
     lowered to 0.1 rad/s (5 ms ramp) at t = 0.05 s while joint 3 turns at 0.6 rad/s (MuJoCo, the

@@ -25,5 +25,5 @@ def cartesian_rows(bounds: tuple[CartesianBound, ...], robot: SymbolicRobot, dt:
         c, c_dot = ca.dot(d, position), ca.mtimes(jacobian, robot.dq)
         lo, hi = acceleration_bounds(c, c_dot, c_min, c_max, b.v_max, float("inf"), b.a_max, dt)
         parts.append(AccelerationRows(jacobian, bias, lo, hi, [cartesian_row_name(b)],
-                                      state_excess(c, c_dot, c_min, c_max, b.v_max, dt)))
+                                      state_excess(c, c_dot, c_min, c_max, b.v_max, lo, hi, dt)))
     return AccelerationRows.stack(parts, robot.nv)

@@ -35,7 +35,7 @@ def joint_rows(limits: JointLimits, q: ca.SX, dq: ca.SX, dt: float, names: list[
         rows.append(selection)
         lower.append(lo)
         upper.append(hi)
-        excess.append(state_excess(q[j], dq[j], q_min[j], q_max[j], v_max[j], dt))
+        excess.append(state_excess(q[j], dq[j], q_min[j], q_max[j], v_max[j], lo, hi, dt))
         kept.append(joint_row_name(names[j]))
     if not kept:
         return AccelerationRows.stack([], n)

@@ -79,18 +79,29 @@ def _upper(x: Scalar, v: Scalar, x_max: Scalar, braking: Scalar, dt: float) -> B
     return ca.fmin(_upper_from_position(x, v, x_max, braking, dt), _upper_from_viability(x, v, x_max, braking, dt))
 
 
-def state_excess(x: Scalar, v: Scalar, x_min: Scalar, x_max: Scalar, v_max: Scalar, dt: float) -> Bound:
+def _overshoot(x: Scalar, v: Scalar, a: Bound, x_max: Scalar, dt: float) -> Bound:
+    """How far x + v t + ½ a t² goes beyond x_max over t ∈ [0, dt] (negative: short of it)."""
+    braking = ca.fmin(a, -_TINY)  # (a safe denominator; used only where a < 0)
+    apex_inside = ca.logic_and(ca.logic_and(a < 0, v > 0), v < -a * dt)
+    peak = ca.if_else(apex_inside, x - v**2 / (2.0 * braking), ca.fmax(x, x + dt * v + 0.5 * dt**2 * a))
+    return peak - x_max
+
+
+def state_excess(x: Scalar, v: Scalar, x_min: Scalar, x_max: Scalar, v_max: Scalar, lower: Bound, upper: Bound,
+                 dt: float) -> Bound:
     """How far the state is beyond [x_min, x_max] or |v| ≤ v_max, in the coordinate's own units
-    (the larger of the two; 0 within, and for a side without a limit), or will be within this
-    period whatever the acceleration: moving toward a position bound too fast for the room left,
-    it crosses by x + v dt/2 − x_max even stopping within the step, the hardest braking the bounds
-    above ever ask for (their weakest form, in a state that is no longer viable). A viable state
-    has room for that (≥ v²/2b + v dt/2), so this is 0 in a closed loop that holds its bounds;
-    without it such a step was "ok" and the bound crossed during it (a Panda's joint 7 0.1 mrad
-    from its limit at 2.4 rad/s: 1.2 mrad beyond it one step later)."""
+    (the larger of the two; 0 within, and for a side without a limit), or may go beyond the
+    position bounds during this period with an acceleration its bounds [lower, upper] allow. In a
+    state that is no longer viable (too close to a bound for its speed, after a disturbance) the
+    bounds take a weaker form: stopping within the step, or braking at the acceleration limit,
+    which still crosses. A viable state's bounds keep the whole step within (the end-of-step and
+    apex terms), so this is 0 in a closed loop that holds its bounds; without it such a step was
+    "ok" and the bound crossed during it (a Panda's joint 7 0.1 mrad from its limit at 2.4 rad/s:
+    1.2 mrad beyond it one step later; an iiwa14's joint 3 0.6 mrad from its limit at 0.8 rad/s
+    under a 10 rad/s² acceleration limit)."""
     excess = ca.SX(0.0)
-    for beyond, limited in ((x + ca.fmax(v, 0.0) * dt / 2.0 - x_max, _limited(x_max)),
-                            (x_min - x - ca.fmin(v, 0.0) * dt / 2.0, _limited(x_min)),
+    for beyond, limited in ((_overshoot(x, v, upper, x_max, dt), _limited(x_max)),
+                            (_overshoot(-x, -v, -lower, -x_min, dt), _limited(x_min)),
                             (ca.fabs(v) - v_max, _limited(v_max))):
         if limited:
             excess = ca.fmax(excess, beyond)
