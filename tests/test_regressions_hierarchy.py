@@ -195,15 +195,23 @@ N_SLOW = 1000
 
 
 def _fallback_controller(robot: str):
-    text = spec_text("X", "  - {name: damping, type: joint, priority: 1, gains: {kp: 0, kd: 5}}", name=f"fallback_{robot}")
-    key, line = ("urdf", UR5_URDF) if robot == "ur5" else ("model", robot)
-    return _controller(text.replace("robot: {model: X}", f"robot: {{{key}: {line}}}"))
+    return _damping_controller(robot, kd=5.0, acceleration_limit=None)
 
 
 def _random_states(c, count: int, seed: int):
     rng = np.random.default_rng(seed)
     lim = c.robot.limits
     return [(rng.uniform(lim.q_min, lim.q_max), rng.uniform(-lim.v_max, lim.v_max)) for _ in range(count)]
+
+
+def _damping_controller(robot: str, kd: float, acceleration_limit: float | None = 10.0):
+    """A joint damping task (gain kd) on iiwa14, panda or a UR5 by URDF, with its joint limits and
+    an acceleration limit (rad/s²) if one is given."""
+    limits = f"  joint_acceleration: {{max: {acceleration_limit:g}}}" if acceleration_limit is not None else ""
+    base = spec_text("X", f"  - {{name: damping, type: joint, priority: 1, gains: {{kp: 0, kd: {kd:g}}}}}",
+                     limits=limits, name=f"damping_{robot}")
+    key, line = ("urdf", UR5_URDF) if robot == "ur5" else ("model", robot)
+    return _controller(base.replace("robot: {model: X}", f"robot: {{{key}: {line}}}"))
 
 
 def _simulate_fallback(robot: str, count: int, seed: int = 0, duration: float = 1.0, substeps: int = 1):
@@ -564,10 +572,7 @@ def test_an_ok_step_keeps_every_joint_within_its_position_limits_during_the_step
     constant over the period) stays within its limits; the states that cannot stay within it
     say "limits relaxed". (Under the 10 rad/s² acceleration limit an iiwa14's joint 3 0.6 mrad from
     its limit at 0.8 rad/s crossed it during an "ok" step.)"""
-    base = spec_text("X", "  - {name: damping, type: joint, priority: 1, gains: {kp: 0, kd: 2}}",
-                     limits="  joint_acceleration: {max: 10}", name=f"room_{robot}")
-    key, line = ("urdf", UR5_URDF) if robot == "ur5" else ("model", robot)
-    c = _controller(base.replace("robot: {model: X}", f"robot: {{{key}: {line}}}"))
+    c = _damping_controller(robot, kd=2.0)
     lim = c.robot.limits
     rng = np.random.default_rng(5)
     seen = {0: 0, 1: 0}
@@ -682,10 +687,7 @@ def test_beyond_its_velocity_limit_a_joint_brakes_under_an_acceleration_limit(ro
     says "ok", and that joint's actual acceleration (Pinocchio's dynamics of the returned torque)
     brakes it by at least the acceleration limit or as hard as its torque limit allows (the bound
     demands more than a_max there: the limit gives way to the way back)."""
-    base = spec_text("X", "  - {name: damping, type: joint, priority: 1, gains: {kp: 0, kd: 5}}",
-                     limits="  joint_acceleration: {max: 10}", name=f"braking_{robot}")
-    key, line = ("urdf", UR5_URDF) if robot == "ur5" else ("model", robot)
-    c = _controller(base.replace("robot: {model: X}", f"robot: {{{key}: {line}}}"))
+    c = _damping_controller(robot, kd=5.0)
     lim = c.robot.limits
     rng = np.random.default_rng(21)
     braked_at_limit = 0
