@@ -431,6 +431,17 @@ def test_literal_messages() -> None:
     assert d.line == 21 and "did you mean 'joint'" in d.message
 
 
+@pytest.mark.parametrize("old, new, message", [
+    ("type: joint", "type: null", "tasks[1].type: null is not allowed; allowed: position, orientation, pose, joint"),
+    ("type: joint", "type: true", "tasks[1].type: true is not allowed; allowed:"),
+    ("frame: tool", "frame: false", "tasks[0].frame: expected text, got false"),
+])
+def test_yaml_literals_are_spelled_as_yaml_spells_them(old: str, new: str, message: str) -> None:
+    """A user wrote null/true/false, not Python's None/True/False; and null is no misspelt 'pose'."""
+    (d,) = _errors(SPEC.replace(old, new))
+    assert message in str(d) and "None" not in d.message and "did you mean" not in d.message
+
+
 def test_field_errors_point_at_the_blamed_key() -> None:
     (d,) = _errors(SPEC.replace("kd: 20}", "kd: [20, 20]}"))
     assert d.path == ("tasks", 0, "gains") and "kd has 2 values but the task has 3 axes" in d.message

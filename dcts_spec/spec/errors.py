@@ -85,13 +85,20 @@ def _capped(diagnostics: list[Diagnostic]) -> list[Diagnostic]:
     return [diagnostics[i] for i in kept] + [note]
 
 
+YAML_LITERALS = {None: "null", True: "true", False: "false"}
+
+
 def shown(value: object, limit: int = 60) -> str:
-    """`repr(value)`, cut to `limit` characters: a wrong value is quoted, not printed whole."""
-    text = repr(value)
+    """`repr(value)`, cut to `limit` characters: a wrong value is quoted, not printed whole. YAML's
+    null, true and false are spelled as the file spells them, not as Python's None, True, False."""
+    text = YAML_LITERALS[value] if value is None or isinstance(value, bool) else repr(value)
     return text if len(text) <= limit else f"{text[:limit]}… ({len(text)} characters)"
 
 
-def did_you_mean(word: str, choices: list[str], n: int = 1) -> str:
-    """` (did you mean 'x'?)` for the closest choices, or an empty string."""
+def did_you_mean(word: object, choices: list[str], n: int = 1) -> str:
+    """` (did you mean 'x'?)` for the closest choices, or an empty string (always for a `word` that
+    is not text: YAML's null is no misspelt 'pose')."""
+    if not isinstance(word, str):
+        return ""
     close = difflib.get_close_matches(word, choices, n=n, cutoff=0.5)
     return f" (did you mean {' or '.join(shown(c) for c in close)}?)" if close else ""

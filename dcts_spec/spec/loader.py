@@ -107,7 +107,7 @@ def _message(error: dict, path: KeyPath, rest: tuple, data: Any, root: type[Base
         key = rest[0] if rest else path[-1]
         parent = path if rest else path[:-1]
         allowed = _allowed_keys(root, parent, data)
-        hint = did_you_mean(str(key), allowed)
+        hint = did_you_mean(key, allowed)
         return f"unknown key {shown(key)}{hint}; allowed keys: {', '.join(allowed)}" if allowed else f"unknown key {shown(key)}"
     if kind == "missing":
         return f"missing required key {rest[0]!r}" if rest else "missing required value"
@@ -117,11 +117,11 @@ def _message(error: dict, path: KeyPath, rest: tuple, data: Any, root: type[Base
         got = error["input"]
         if isinstance(got, str) and got in allowed:  # `version: "1"`
             return f"expected the number {got}, got the text {got!r} (remove the quotes)"
-        return f"{shown(got)} is not allowed{did_you_mean(str(got), allowed)}; allowed: {', '.join(allowed)}"
+        return f"{shown(got)} is not allowed{did_you_mean(got, allowed)}; allowed: {', '.join(allowed)}"
     if kind == "union_tag_invalid":
         allowed = re.findall(r"'([^']*)'", error["ctx"]["expected_tags"])
         got = error["ctx"]["tag"]
-        return f"unknown type {shown(got)}{did_you_mean(str(got), allowed)}; allowed: {', '.join(allowed)}"
+        return f"unknown type {shown(got)}{did_you_mean(got, allowed)}; allowed: {', '.join(allowed)}"
     if kind == "union_tag_not_found":
         tag_key = error["ctx"]["discriminator"].strip("'")  # pydantic quotes it: "'type'"
         return f"missing key {tag_key!r} (what kind of entry this is)"
