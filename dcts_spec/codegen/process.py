@@ -105,7 +105,7 @@ def run(command: list[str], cwd: Path, what: str, env: dict | None = None, timeo
                 process.wait(timeout=min(HEARTBEAT_S, limit - elapsed))
             except subprocess.TimeoutExpired:
                 if time.monotonic() - start < limit:
-                    phase(f"{what}: still running after {time.monotonic() - start:.0f} s (time-out {limit:.0f} s)")
+                    phase(f"{what}: still running after {time.monotonic() - start:.0f} s (time-out {limit:.3g} s)")
     except BaseException:
         _end_group(process)  # Ctrl-C, SIGTERM: the new session does not get the terminal's signal
         raise
@@ -114,7 +114,7 @@ def run(command: list[str], cwd: Path, what: str, env: dict | None = None, timeo
             _end_group(process)
         reader.join(timeout=5)
     if timed_out:
-        raise CodegenError(f"{what}: timed out after {limit:.0f} s; its processes were ended (allow more "
+        raise CodegenError(f"{what}: timed out after {limit:.3g} s; its processes were ended (allow more "
                            f"with --build-timeout SECONDS or {TIMEOUT_VARIABLE})")
     output = "".join(lines)
     if process.returncode != 0:
