@@ -246,6 +246,22 @@ def test_grids_cross_and_start_states_stay_within_the_limits() -> None:
                                                  "com": [0.0, 0.0, 0.0]}]
 
 
+def test_a_swept_parameter_wins_over_the_specs_own_set_at_t0() -> None:
+    """The spec sets kp at t = 0 itself: the sample's kp is what runs from t = 0 (it ran the spec's,
+    and every sample had the same metrics), and the spec's later changes still come."""
+    campaign = load_campaign_text("version: 1\nsamples: 2\nduration: 0.3\n"
+                                  "controller: {parameters: {tool_position.kp: {grid: [20, 3000]}}}\n")
+    spec_changes = [{"time": 0.1, "values": {"joint_torque.max": 80}}, {"time": 0.0, "values": {"tool_position.kp": 400}}]
+    joints = JointRange(np.zeros(7), -np.ones(7), np.ones(7), np.zeros(7, dtype=bool))
+    sampler = Sampler(campaign, 7)
+    for sample in (sampler.sample(i) for i in range(sampler.count)):
+        data = sample_spec_data({"scenario": {"parameters": spec_changes}}, campaign, sample, joints)
+        changes = sorted(data["scenario"]["parameters"], key=lambda c: c["time"])  # (as the run orders them)
+        at_start = [c["values"]["tool_position.kp"] for c in changes if c["time"] == 0.0]
+        assert at_start[-1] == sample.value("controller", "parameters", "tool_position.kp") != 400
+        assert changes[-1] == spec_changes[0]
+
+
 def test_the_committed_campaign_schema_is_up_to_date_and_takes_the_example() -> None:
     jsonschema = pytest.importorskip("jsonschema")
     committed = ROOT / "schemas" / "dcts-campaign.schema.json"

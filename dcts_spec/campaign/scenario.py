@@ -69,7 +69,9 @@ def sample_spec_data(base: dict[str, Any], campaign: Campaign, sample: Sample, j
         values = {name: sample.value("controller", "parameters", name) if not isinstance(value, list)
                   else [sample.value("controller", "parameters", name, j) for j in range(len(value))]
                   for name, value in controller.parameters.items()}
-        scenario["parameters"] = [{"time": 0.0, "values": values}, *scenario.get("parameters", [])]
+        # after the spec's own changes: the run applies those of one time in list order, and the
+        # sample's values must win over a set the spec gives at t = 0 (before, it overrode them)
+        scenario["parameters"] = [*scenario.get("parameters", []), {"time": 0.0, "values": values}]
     return data
 
 
