@@ -250,9 +250,15 @@ def _check_tasks(spec: Spec, robot: Robot) -> list[Diagnostic]:
     frames = [f.name for f in robot.model.frames]
     for i, task in enumerate(spec.tasks):
         at = ("tasks", i)
-        if task.name in seen:
-            diags.append(src.diagnostic(at + ("name",), f"task name {task.name!r} is already used by tasks[{seen[task.name]}]"))
-        seen.setdefault(task.name, i)
+        # (names compared in upper case: the generated header's macros spell them so, <NAME>_REF_<TASK>_…)
+        other = seen.get(task.name.upper())
+        if other is not None and spec.tasks[other].name == task.name:
+            diags.append(src.diagnostic(at + ("name",), f"task name {task.name!r} is already used by tasks[{other}]"))
+        elif other is not None:
+            diags.append(src.diagnostic(at + ("name",), f"task name {task.name!r} differs from tasks[{other}]'s "
+                                        f"{spec.tasks[other].name!r} only in case: the generated C spells task names "
+                                        f"in upper case in its macros (…_REF_{task.name.upper()}_…); choose another name"))
+        seen.setdefault(task.name.upper(), i)
         if task.frame is not None and not robot.has_frame(task.frame):
             diags.append(src.diagnostic(at + ("frame",), f"no frame {task.frame!r} in the robot{frame_candidates(task.frame, frames, spec)}"))
         if task.type != "joint":
