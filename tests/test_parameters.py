@@ -159,6 +159,9 @@ def test_a_new_set_during_a_ramp_starts_from_where_it_is():
     ({"joint_position.min": 0.5, "joint_position.max": 0.4}, "joint_position.max", "above the matching min"),
     ({"cartesian.tool.z.min": 1.3}, "cartesian.tool.z.min", "compiled envelope"),
     ({"tool.activation": 1.5}, "tool.activation", "outside [0, 1]"),
+    # (the value as given, not rounded by %g to the bound it exceeds)
+    ({"tool.activation": 1 + 1e-15}, "tool.activation", "1.000000000000001 is outside [0, 1]"),
+    ({"joint_torque.max": 100.0000001}, "joint_torque.max", "100.0000001 Nm (joint1) is outside"),
     ({"tool.stiffness": 1}, "tool.stiffness", "no such run-time parameter"),
     ({"posture.kp": [1, 2]}, "posture.kp", "takes 7"),
 ])

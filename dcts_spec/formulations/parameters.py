@@ -38,6 +38,13 @@ class ParameterError(ValueError):
         self.field = field
 
 
+def exact(value: float) -> str:
+    """`value` short (%g) where that is the number, else in full: a refused 100.0000001 is not
+    shown as the bound 100 it exceeds."""
+    short = f"{value:g}"
+    return short if float(short) == value else repr(float(value))
+
+
 @dataclass(frozen=True)
 class ParameterInput:
     """A slice of the run-time parameter vector `param`."""
@@ -107,13 +114,13 @@ class ParameterLayout:
                     raise ParameterError(e.name, f"{v}{where} is not finite")
                 if v < lo or (e.lower_open and v == lo) or v > hi:
                     side = "(" if e.lower_open else "["
-                    value = f"{v:g} {e.unit}" if e.unit else f"{v:g}"
-                    raise ParameterError(e.name, f"{value}{where} is outside {side}{lo:g}, {hi:g}]"
+                    value = f"{exact(v)} {e.unit}" if e.unit else exact(v)
+                    raise ParameterError(e.name, f"{value}{where} is outside {side}{exact(lo)}, {exact(hi)}]"
                                          + (" (the compiled envelope)" if _is_limit(e) else ""))
         for i, j in self.order:
             if not values[i] < values[j]:
                 upper = self._owner(j)
-                raise ParameterError(upper.name, f"{values[j]:g} must be above the matching min {values[i]:g}")
+                raise ParameterError(upper.name, f"{exact(values[j])} must be above the matching min {exact(values[i])}")
 
     def vector(self, values: dict | np.ndarray, base: np.ndarray | None = None) -> np.ndarray:
         """A full parameter vector: `values` as a vector, or a dict {name: value(s)} applied over
