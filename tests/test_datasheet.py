@@ -268,3 +268,18 @@ def test_header_lists_the_locked_joints_the_firmware_holds(sheet, tmp_path):
     header = re.sub(r"\n \* +", " ", (tmp_path / "bundle" / "locked.h").read_text())  # (wrapped lines joined)
     assert re.search(r"Locked +not in q: hold them there yourself .*: joint7 at 0\.3, joint5 at -0\.2\.", header)
     assert "Locked " not in sheet[1]
+
+
+@pytest.mark.parametrize(("ramp_time", "words"), [
+    (0.0025, "over 3 step(s) (0.003 s; ramp_time 0.0025 s in whole periods)"),
+    (0.004, "over 4 step(s) (0.004 s)"),
+])
+def test_the_ramp_is_stated_in_the_steps_it_takes(tmp_path, ramp_time, words):
+    """A ramp_time of 2.5 periods takes 3 steps: the header gave 0.0025 s for them."""
+    from dcts_spec.codegen.datasheet import parameters_doc_text
+
+    text = MINIMAL.read_text() + f"parameters: {{ramp_time: {ramp_time}, tasks: {{tool_position: [kp]}}}}\n"
+    (tmp_path / "ramp.yaml").write_text(text)
+    spec = load_spec(tmp_path / "ramp.yaml")
+    doc = " ".join(parameters_doc_text(Controller(spec, validate_spec(spec).robot), "ramp").replace("*", " ").split())
+    assert words in doc

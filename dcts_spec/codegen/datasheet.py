@@ -310,11 +310,15 @@ def parameters_doc_text(controller: Controller, name: str) -> str:
     if not layout.entries:
         return (" * Run-time parameters: none (the spec has no `parameters` section); the gains and limits\n"
                 " * below are constants of the code.")
-    steps = ramp_steps(layout.ramp_time, controller.problem.period)
+    period = controller.problem.period
+    steps = ramp_steps(layout.ramp_time, period)
+    duration = f"{number(steps * period)} s"
+    if number(steps * period) != number(layout.ramp_time):  # (whole periods: a ramp_time of 2.5 periods takes 3)
+        duration += f"; ramp_time {number(layout.ramp_time)} s in whole periods"
     lines = wrap(
         f"Run-time parameters ({name}_params, SI units; the compiled values are the defaults). "
         f"{name}_set_params checks a whole set and either takes it or keeps the old one, naming the wrong "
-        f"field; a set taken is reached linearly over {steps} step(s) ({number(layout.ramp_time)} s), so a "
+        f"field; a set taken is reached linearly over {steps} step(s) ({duration}), so a "
         "change makes no torque jump. Limits only narrow: each stays within its compiled value.")
     rows = [["field", "unit", "default", "range", "components"]]
     for e in layout.entries:
