@@ -444,7 +444,7 @@ def test_a_campaign_that_stopped_before_any_sample_starts_again_with_the_changed
 @pytest.mark.parametrize(("line", "words"), [
     ('{"index": 2, "seed": 1, "status": "ok"', "not a JSON object"),  # (garbled in the middle)
     ('{"index": 99, "seed": 1, "status": "ok"}', "its index 99 is not a sample of this campaign (0 to 5)"),
-    ('{"index": 1, "seed": 1}', "its status None is none of ok, invalid, error"),
+    ('{"index": 1, "seed": 1}', "its status null is none of ok, invalid, error"),
 ])
 def test_a_foreign_line_in_the_samples_is_an_error_at_it(spec_file, campaign_file, serial_run, tmp_path,
                                                          line, words) -> None:
