@@ -333,7 +333,7 @@ def test_scalar_or_list_fields() -> None:
 
 @pytest.mark.parametrize(
     ("value", "message"),
-    [("[]", "empty list"), ("true", "got True"), ("fast", "got 'fast'"), ("[1, two]", "item 1"), (".nan", "got nan")],
+    [("[]", "empty list"), ("true", "got true"), ("fast", "got 'fast'"), ("[1, two]", "item 1"), (".nan", "got nan")],
 )
 def test_scalar_or_list_rejects(value: str, message: str) -> None:
     (d,) = _errors(SPEC.replace("joint_torque: {max: 100}", f"joint_torque: {{max: {value}}}"))
