@@ -259,7 +259,7 @@ class Controller:
 
     def _solve(self, data: dict[str, np.ndarray]) -> np.ndarray | None:
         """The lexicographic solution at the data (None if DAQP failed)."""
-        return solve_lexicographic(*self._qp(data), self._structure)
+        return solve_lexicographic(*self._qp(data), self._structure, data["Q"])
 
     def answer_spread(self, q, dq, tau_ext, ref, x: np.ndarray, samples: int, enough: float) -> np.ndarray:
         """How far the last step's answer x (its QP solution, at this state) is determined by its QP
@@ -274,7 +274,7 @@ class Controller:
             command = np.concatenate([data["tau0"].ravel() + data["T"] @ answer, data["ddq0"].ravel() + data["Q"] @ answer])
             return command, answer
 
-        return rounding_spread(*self._qp(data), self._structure, x, outputs, samples, enough)
+        return rounding_spread(*self._qp(data), self._structure, x, outputs, samples, enough, acceleration_map=data["Q"])
 
     def _binding(self, data: dict[str, np.ndarray], x: np.ndarray) -> bool:
         """Does a torque limit or a joint/Cartesian bound bind at x?"""

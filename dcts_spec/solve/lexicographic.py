@@ -12,7 +12,8 @@ a level therefore means fixing its variables (lb = ub), and the cascade is:
   2. otherwise, for each level i, highest first, with the levels above fixed (starting at the
      lowest level that can be scaled with every level above it met, if there is one):
        scale:  max sᵢ with δᵢ fixed (0), the levels below free;
-       bend:   only if no sᵢ ∈ [0, 1] is feasible: min ‖δᵢ‖², then scale again;
+       bend:   only if no sᵢ ∈ [0, 1] is feasible: min ‖δᵢ‖², its split of the task acceleration
+               into sᵢ and δᵢ made the one with the least bend (`smallest_bend`), then scale again;
      then the remaining levels nominal: if feasible, done (for the lowest level, its scaling and
      this QP are `finish_lowest` again).
   3. if even the highest level cannot be bent into feasibility, the torque limits cannot hold the
@@ -346,10 +347,13 @@ def unbounded_solution(H: np.ndarray, f: np.ndarray, ubx: np.ndarray, structure:
 
 
 class Cascade:
-    """The stages of one lexicographic solve on numeric (scaled) QP data."""
+    """The stages of one lexicographic solve on numeric (scaled) QP data. `acceleration_map`: Q
+    (q̈ = q̈₀ + Q x), from which a bent level's split into s and δ is made exact (`smallest_bend`);
+    without it, the split is the bend stage's own."""
 
-    def __init__(self, H, f, A, lbx, ubx, lba, uba, structure: Structure):
+    def __init__(self, H, f, A, lbx, ubx, lba, uba, structure: Structure, acceleration_map: np.ndarray | None = None):
         self.H, self.f, self.A = H, f, A
+        self.acceleration_map = acceleration_map
         self.lbx, self.ubx = lbx.copy(), ubx.copy()
         self.lba, self.uba = lba.copy(), uba.copy()
         self.structure = structure
@@ -502,6 +506,32 @@ class Cascade:
         weights[list(bend)] = 1.0
         return self._proximal(weights, np.zeros(lbx.size), BEND_STEP, lbx, ubx)
 
+    def smallest_bend(self, level: int, x: np.ndarray, lbx, ubx) -> np.ndarray:
+        """x with `level`'s task acceleration v = s ẍ_d + δ split into the s within lbx/ubx that
+        leaves the least ‖δ‖, the rest of x as it is.
+
+        Only v moves the arm: Q's column of s is Q_δ g for g = ẍ_d d_s/d_δ (the scaled variables),
+        and every x + t(1, −g) along s and δ has the same rows, torques and accelerations. A bend
+        stage on the sliver the levels above leave is where DAQP fails or stops early (active rows
+        dependent along that line), and its answer's split was then arbitrary: on an xArm7 under
+        a 15 % mass mismatch C and Python reported 0.17 and 0.61 for a level that got 0.006 of its
+        target, and the golden test failed. Along the line, ‖w − g s‖² (w = δ + g s) is least at
+        s = gᵀw/gᵀg: the bend stage's own answer where it converged."""
+        s, bend = self.structure.priorities[level]
+        Q = self.acceleration_map
+        if Q is None or not bend:
+            return x
+        bend = list(bend)
+        Q_bend = Q[:, bend]
+        g = _cholesky_solve(Q_bend.T @ Q_bend, Q_bend.T @ Q[:, s])
+        if g is None or not g.dot(g) > 0.0:  # (a singular level; ẍ_d = 0: s moves nothing)
+            return x
+        w = x[bend] + g * x[s]
+        out = x.copy()
+        out[s] = min(max(g.dot(w) / g.dot(g), lbx[s]), ubx[s])
+        out[bend] = w - g * out[s]
+        return out
+
     def finish_lowest(self, lbx, ubx, witness: np.ndarray | None = None) -> np.ndarray | None:
         """The lowest level's scaling stage and the final QP in one, its bend fixed in lbx/ubx and
         the levels above too: min ½xᵀHx + fᵀx − K s. A linear term large enough is an exact penalty:
@@ -594,7 +624,12 @@ class Cascade:
                 if x is None:
                     x = self.bend(i, free_lo, free_hi)
                     if x is None:  # infeasible: only possible for the first level, else DAQP failed
-                        return witness
+                        if witness is None:
+                            return None
+                        # on the sliver the levels above leave (see smallest_bend), whose point
+                        # the witness is: its split made the bend's, the levels below solved on
+                        x = witness
+                    x = self.smallest_bend(i, x, free_lo, free_hi)
                     self._admit(x, lbx, ubx)
                     lbx[bend] = ubx[bend] = x[bend]
                     # (the bend's solution witnesses a scaling)
@@ -700,10 +735,12 @@ class Cascade:
         return True
 
 
-def solve_lexicographic(H, f, A, lbx, ubx, lba, uba, structure: Structure) -> np.ndarray | None:
-    """The lexicographic solution of a QP's priority levels (None if DAQP failed). Whether the
-    bounds had to be relaxed is for `check_bounds` to tell, on the original data."""
-    cascade = Cascade(H, f, A, lbx, ubx, lba, uba, structure)
+def solve_lexicographic(H, f, A, lbx, ubx, lba, uba, structure: Structure,
+                        acceleration_map: np.ndarray | None = None) -> np.ndarray | None:
+    """The lexicographic solution of a QP's priority levels (None if DAQP failed); with the
+    acceleration map Q, a bent level's split into s and δ the least bend (`Cascade.smallest_bend`).
+    Whether the bounds had to be relaxed is for `check_bounds` to tell, on the original data."""
+    cascade = Cascade(H, f, A, lbx, ubx, lba, uba, structure, acceleration_map)
     x = cascade.levels()
     if x is not None or not cascade.relax():
         return x

@@ -27,14 +27,15 @@ def _changed(values: np.ndarray, rng: np.random.Generator) -> np.ndarray:
 
 def rounding_spread(H, f, A, lbx, ubx, lba, uba, structure: Structure, x: np.ndarray,
                     outputs: Callable[[np.ndarray], Sequence[np.ndarray]], samples: int, enough: float,
-                    seed: int = 0) -> np.ndarray:
+                    seed: int = 0, acceleration_map: np.ndarray | None = None) -> np.ndarray:
     """For each group of outputs(x) (e.g. the torques, the QP solution), the largest relative
     change (|Δ| / max(1, |value|), entry by entry) over `samples` solves of the QP with every entry
     of its data changed by ~ROUNDING relative (H symmetrically; both bounds of a variable or a row
     by the same factor, so that a variable fixed stays fixed and an equality stays one). Sampling
     stops as soon as every group's change exceeds `enough`; a group's spread is ∞ if a solve fails.
     Groups, because a level that no free direction can move leaves its own variables undetermined
-    and the torques not (a degenerate level of a 7-joint arm: x moved by 1e2, τ by 2e-8)."""
+    and the torques not (a degenerate level of a 7-joint arm: x moved by 1e2, τ by 2e-8).
+    `acceleration_map`: as for `solve_lexicographic` (changed like the data)."""
     rng = np.random.default_rng(seed)
     reference = [np.asarray(group, dtype=float) for group in outputs(x)]
     scales = [np.maximum(1.0, np.abs(group)) for group in reference]
@@ -43,7 +44,8 @@ def rounding_spread(H, f, A, lbx, ubx, lba, uba, structure: Structure, x: np.nda
         E = ROUNDING * rng.standard_normal(H.shape)
         variables, rows = _changed(np.ones(lbx.size), rng), _changed(np.ones(lba.size), rng)
         changed = solve_lexicographic(H * (1.0 + 0.5 * (E + E.T)), _changed(f, rng), _changed(A, rng),
-                                      lbx * variables, ubx * variables, lba * rows, uba * rows, structure)
+                                      lbx * variables, ubx * variables, lba * rows, uba * rows, structure,
+                                      None if acceleration_map is None else _changed(acceleration_map, rng))
         if changed is None:
             return np.full(len(reference), np.inf)
         for i, (group, value, scale) in enumerate(zip(outputs(changed), reference, scales)):
