@@ -771,3 +771,56 @@ def test_a_bent_levels_scaling_is_the_same_in_c(tmp_path, monkeypatch):
     np.testing.assert_allclose(got.scaling, expected.scaling, rtol=1e-6, atol=1e-9)
     np.testing.assert_allclose(got.tau, expected.tau, rtol=1e-6, atol=1e-8)
 
+
+NARROWED = """
+version: 1
+name: narrow
+robot: {model: iiwa14}
+limits:
+  joint_torque: {max: 100}
+tasks:
+  - {name: tool, type: position, frame: tool, priority: 1, gains: {kp: 100, kd: 20}, reference: {position: [0.5, 0.0, 0.6]}}
+  - {name: posture, type: joint, priority: 2, gains: {kp: 0, kd: 5}}
+parameters:
+  limits: [joint_position, joint_velocity]
+"""
+
+
+@pytest.mark.parametrize("limit", ["joint_position.max", "joint_velocity.max"])
+def test_without_an_acceleration_limit_a_limit_lowered_below_the_state_is_reached_braking(limit):
+    """No joint_acceleration limit: a position limit lowered 0.05 rad below joint 6 at rest asked
+    −3142 rad/s² (back at the velocity limit within the step) when the ramp landed, and the torque
+    jumped 123 Nm (first tried from outside); a velocity limit lowered below the joint's speed
+    asked the same kind of one-period change. Now the state beyond the narrowed limit is brought
+    back braking at the braking the limits assume (10 rad/s²), reported as relaxed meanwhile (Pinocchio's ABA, 1 ms
+    steps, the Python runtime)."""
+    c = dcts_spec.build_controller(load_spec_text(NARROWED, "narrow.yaml"))
+    model, data = c.robot.model, c.robot.model.createData()
+    q, dq = np.radians([0, 30, 0, -60, 0, 60, 0]), np.zeros(7)
+
+    def run(steps: int) -> list:
+        nonlocal q, dq
+        out = []
+        for _ in range(steps):
+            r = c.step(q, dq)
+            dq = dq + DT * pin.aba(model, data, q, dq, r.tau)
+            q = q + DT * dq
+            out.append(r)
+        return out
+
+    run(1500)  # (settled: joint 6 at rest near 1.47 rad)
+    value = np.array(c.params()[limit])
+    if limit == "joint_position.max":
+        value[5] = q[5] - 0.05
+    else:
+        dq[5] = 0.6  # (a joint turning, its limit lowered below its speed)
+        value[5] = 0.1
+    before = c.step(q, dq).tau
+    c.set_params({limit: value})
+    steps = run(300)
+    torques = np.array([before] + [r.tau for r in steps])
+    assert np.abs(np.diff(torques, axis=0)).max() < 15.0, np.abs(np.diff(torques, axis=0)).max()
+    assert any(r.status == 1 and "joint:joint6" in r.relaxed for r in steps)
+    assert np.abs([r.ddq[5] for r in steps[5:]]).max() < 10.0 + 1e-6  # (braking at 10 rad/s², no harder)
+    back = q[5] <= value[5] + 1e-5 if limit == "joint_position.max" else abs(dq[5]) <= value[5] + 1e-5
+    assert back and steps[-1].status == 0

@@ -133,32 +133,48 @@ def acceleration_bounds(
         slowest, fastest = (-v_max - v) / dt, (v_max - v) / dt
         upper = ca.fmin(ca.fmax(upper, slowest), fastest)
         lower = ca.fmin(ca.fmax(lower, slowest), fastest)
+    # Braking allowed beyond what the limits ask, by how far the state is beyond its compiled
+    # envelope (of upper, of lower): by up to Δv/dt + 2Δx/dt², the acceleration that removes the
+    # excess in one period; 0 at the envelope, growing continuously beyond it.
+    low_env, high_env, v_env = envelope if envelope is not None else (x_min, x_max, v_max)
+    give_down, give_up = ca.SX(0.0), ca.SX(0.0)
+    if _limited(v_env):
+        give_down += ca.fmax(v - v_env, 0.0) / dt
+        give_up += ca.fmax(-v - v_env, 0.0) / dt
+    if _limited(high_env):
+        give_down += 2.0 * ca.fmax(x - high_env, 0.0) / dt**2
+    if _limited(low_env):
+        give_up += 2.0 * ca.fmax(low_env - x, 0.0) / dt**2
     if _limited(accel_limit):
         # The acceleration limit bounds the command, but gives way to the braking that takes the
-        # state back within its compiled envelope: beyond it by Δv or Δx, by up to Δv/dt + 2Δx/dt²,
-        # the acceleration that removes the excess in one period (as little as the position and
-        # velocity terms need; the torque limits decide the rest, through the relaxation). Capped
-        # at the limit, the braking lost to any unmodelled acceleration beyond it: a 0.01 Nm bias
-        # in the measured external torque of a light wrist (xArm7, 73 rad/s² against a 20 rad/s²
-        # limit) ran it to 73 × its velocity limit, and a UR5's elbow stayed 3 rad beyond its
-        # position limit 1.3 s after a push, braking at 15 of the 150 Nm it had. Within the
-        # envelope the limit holds: a limit lowered at run time below the state is reached braking
-        # at it (given way to, its one-period demand kicked an xArm7's torque by 1.4 × its limit,
-        # at a parameter change the ramp is there to smooth). The give is 0 at the envelope and
-        # grows continuously beyond it.
-        low_env, high_env, v_env = envelope if envelope is not None else (x_min, x_max, v_max)
-        give_down, give_up = ca.SX(0.0), ca.SX(0.0)  # (braking allowed beyond the limit: of upper, of lower)
-        if _limited(v_env):
-            give_down += ca.fmax(v - v_env, 0.0) / dt
-            give_up += ca.fmax(-v - v_env, 0.0) / dt
-        if _limited(high_env):
-            give_down += 2.0 * ca.fmax(x - high_env, 0.0) / dt**2
-        if _limited(low_env):
-            give_up += 2.0 * ca.fmax(low_env - x, 0.0) / dt**2
+        # state back within its compiled envelope (as little as the position and velocity terms
+        # need; the torque limits decide the rest, through the relaxation). Capped at the limit,
+        # the braking lost to any unmodelled acceleration beyond it: a 0.01 Nm bias in the
+        # measured external torque of a light wrist (xArm7, 73 rad/s² against a 20 rad/s² limit)
+        # ran it to 73 × its velocity limit, and a UR5's elbow stayed 3 rad beyond its position
+        # limit 1.3 s after a push, braking at 15 of the 150 Nm it had. Within the envelope the
+        # limit holds: a limit lowered at run time below the state is reached braking at it (given
+        # way to, its one-period demand kicked an xArm7's torque by 1.4 × its limit, at a
+        # parameter change the ramp is there to smooth).
         upper = ca.fmin(ca.fmax(upper, -accel_limit - give_down), accel_limit)
         lower = ca.fmax(ca.fmin(lower, accel_limit + give_up), -accel_limit)
         lower = ca.if_else(upper < -accel_limit, ca.fmin(lower, upper), lower)
         upper = ca.if_else(lower > accel_limit, ca.fmax(upper, lower), upper)
+    elif any(isinstance(limit, ca.SX) for limit in (x_min, x_max, v_max)):
+        # No acceleration limit, but limits the firmware may narrow: a state beyond a narrowed
+        # limit (within the envelope) is brought back braking at `braking`, as under an
+        # acceleration limit, not in one period: a position limit lowered 0.05 rad below an
+        # iiwa14's joint 6 asked -3142 rad/s² (back at the velocity limit within the step) and
+        # the torque jumped 123 Nm when the ramp landed. Within its limits a state brakes as hard
+        # as the limits ask (a joint pushed toward its limit still stops at it).
+        beyond_high, beyond_low = ca.SX(0.0), ca.SX(0.0)
+        for high, low, value in ((x_max, x_min, x), (v_max, -v_max if _limited(v_max) else v_max, v)):
+            if _limited(high):
+                beyond_high = ca.logic_or(beyond_high, value > high)
+            if _limited(low):
+                beyond_low = ca.logic_or(beyond_low, value < low)
+        upper = ca.if_else(beyond_high, ca.fmax(upper, -braking - give_down), upper)
+        lower = ca.if_else(beyond_low, ca.fmin(lower, braking + give_up), lower)
     upper = ca.fmin(ca.fmax(upper, -_HUGE), _HUGE)
     lower = ca.fmin(ca.fmax(lower, -_HUGE), _HUGE)
     middle = 0.5 * (lower + upper)
