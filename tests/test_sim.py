@@ -146,6 +146,22 @@ def test_push_with_other_integrators_is_measured_closely(integrator: str, subste
     assert error < 0.01 * np.abs(log.tau_ext_true).max()
 
 
+def test_a_push_within_a_control_period_is_logged_as_the_periods_mean_torque() -> None:
+    """With substeps, τ_ext was logged at each period's first substep only: a push of 2 of the 4
+    substeps of a period (from 0.1005 s for 0.5 ms) acted (q̇ jumped) but logged 0 Nm, and so did
+    max_disturbance_torque. A period's τ_ext is now the mean of its substeps', what the motion and
+    the motion-based estimate see."""
+    force = np.array([0.0, 100.0, 0.0])
+    push = "{type: force, body: link7, point: [0, 0, 0.045], force: [0, 100, 0], start: 0.1005, duration: 0.0005}"
+    sim, log = simulate(spec_text(f"  duration: 0.15\n  substeps: 4\n  integrator: implicitfast\n"
+                                  f"  disturbances:\n    - {push}\n"))
+    full = point_jacobian(sim.robot.model, log.q[100], "link7", np.array([0, 0, 0.045]))[:3].T @ force
+    np.testing.assert_allclose(log.tau_ext_true[100], 0.5 * full, atol=1e-3 * np.abs(full).max())
+    assert np.abs(np.delete(log.tau_ext_true, 100, axis=0)).max() == 0.0
+    np.testing.assert_allclose(log.tau_ext_measured[101], log.tau_ext_true[100], atol=1e-2 * np.abs(full).max())
+    assert analyze(sim, log).summary["max_disturbance_torque"] == pytest.approx(np.abs(log.tau_ext_true[100]).max())
+
+
 def test_unmodelled_payload_shows_up_in_measured_torque() -> None:
     scenario = "  duration: 1.0\n  payloads:\n    - {frame: tool, mass: 3.0, com: [0, 0, 0.05]}\n"
     sim, log = simulate(spec_text(scenario))

@@ -12,8 +12,10 @@ class SimulationLog:
     """Per control step k (time t_k = k T): the state, the controller's inputs and outputs.
 
     `tau` is applied during [t_k, t_k + T); `ddq` is the actual mean acceleration over that
-    period, (q̇_{k+1} − q̇_k)/T; `tau_ext_true` is the joint torque of the disturbances at t_k
-    (payloads and model errors are not disturbances), `tau_ext_measured` what the controller got.
+    period, (q̇_{k+1} − q̇_k)/T; `tau_ext_true` is the joint torque of the disturbances during that
+    period, the mean over its simulation substeps (their impulse over T; with one substep, the
+    torque at t_k); payloads and model errors are not disturbances. `tau_ext_measured` is what the
+    scenario's sensor gave the controller (which ignores it with controller.external_torque: ignored).
     """
 
     period: float

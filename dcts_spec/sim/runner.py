@@ -102,6 +102,7 @@ class Simulation:
         q, dq, ddq, tau, ddq_cmd = log.q, log.dq, log.ddq, log.tau, log.ddq_commanded
         tau_true, tau_meas, refs, times = log.tau_ext_true, log.tau_ext_measured, log.ref, log.time
         scaling, status = log.scaling, log.status
+        substep_tau = np.zeros(n)  # a later substep's τ_ext, summed into the period's
         step, mj_step, ctrl = self.runtime.step, mujoco.mj_step, d.ctrl
         # The C runtime writes its outputs straight into the log (no result objects per step).
         step_into = getattr(self.runtime, "step_into", None)
@@ -143,12 +144,19 @@ class Simulation:
                     scaling[k] = result.scaling
                     status[k] = result.status
                     _mark(log, k, result.relaxed)
+                # τ_ext of the period is the mean of its substeps' (the impulse over T, what the motion
+                # and the motion-based estimate see): a push starting or ending mid-period counts.
                 for s in range(substeps):
                     j = k * substeps + s
                     disturbances.apply(m, d, j)
                     if s == 0:
                         disturbances.generalized(m, d, j, tau_true[k])
+                    else:
+                        disturbances.generalized(m, d, j, substep_tau)
+                        tau_true[k] += substep_tau
                     mj_step(m, d)
+                if substeps > 1:
+                    tau_true[k] /= substeps
                 if bad_qacc.number or bad_ctrl.number:
                     log.diverged_at = float(times[k])
                     done = k  # step k has no valid successor
