@@ -135,7 +135,7 @@ def test_summary_definitions(case) -> None:
     assert summary["max_torque_violation"] == pytest.approx(2.0)
     assert summary["max_torque_jump"] == pytest.approx(52.0) and summary["max_torque_jump_ratio"] == pytest.approx(1.04)
     assert summary["torque_jump_steps"] == 2  # up at 9 and down at 10; not the 4 Nm ones
-    assert summary["max_commanded_acceleration"] == pytest.approx(321.0)
+    assert summary["max_controller_acceleration"] == pytest.approx(321.0)  # (no τ_ext: a = q̈_cmd)
     assert summary["joint_acceleration_limits"] is bool(np.isfinite(robot.limits.a_max).any())
     assert summary["solver_failures"] == 1 and summary["limits_relaxed"] == 1
     assert summary["min_scaling"] == 0.0
@@ -310,6 +310,38 @@ def test_min_scaling_says_which_level_and_when(case) -> None:
     assert run.summary["min_scaling_at"] is None and "min scaling 1 (never scaled)" in describe(run)
 
 
+IGNORED = SPEC.replace("scenario:", "controller: {external_torque: ignored}\nscenario:")
+
+
+@pytest.mark.parametrize(("text", "used"), [(SPEC, True), (IGNORED, False)])
+def test_the_tau_ext_metrics_are_of_the_input_the_controller_used(case, text: str, used: bool) -> None:
+    """With controller.external_torque: ignored the controller takes τ_ext = 0 whatever the sensor
+    gives. The estimate error and the plot's input line were of the sensor's value (exp5_payload:
+    0.243 Nm where the input was off by 28.8 Nm), and max_commanded_acceleration was of q̈_cmd =
+    M⁻¹(τ − ν − g), not of a = q̈_cmd + M⁻¹τ_ext,used, which joint_acceleration bounds."""
+    _, robot, log, _ = case
+    spec = load_spec_text(text)
+    push = np.zeros_like(log.tau)
+    push[10:20, 3] = 12.0
+    ddq_commanded = np.random.default_rng(2).uniform(-5, 5, log.tau.shape)
+    # a perfect one-step-late estimate
+    log = SimulationLog(**{**log.__dict__, "tau_ext_true": push, "tau_ext_measured": np.roll(push, 1, axis=0),
+                           "ddq_commanded": ddq_commanded})
+    series = evaluate(spec, robot, log)
+    summary = summarize(log, series, robot, [1, 2, 3])
+    input_torque = log.tau_ext_measured if used else np.zeros_like(push)
+    assert summary["max_external_torque_estimate_error"] == pytest.approx(0.0 if used else 12.0)
+    a = ddq_commanded + np.array([np.linalg.solve(dynamics(robot.model, q, dq)[0], t)
+                                  for q, dq, t in zip(log.q, log.dq, input_torque)])
+    assert summary["max_controller_acceleration"] == pytest.approx(np.abs(a).max(), rel=1e-9)
+    summary["units"] = summary_units(summary, series, robot)
+    run = RunResult("dcts", robot, log, series, summary, [1, 2, 3], {})
+    axes = external_torque_figure(run).axes[3]
+    line = next(line for line in axes.lines if line.get_label() == "controller input (τ_ext used)")
+    np.testing.assert_array_equal(line.get_ydata(), input_torque[:, 3])
+    assert axes.get_title() == f"joint4 (input off by ≤ {0.0 if used else 12.0:.2g} Nm)"
+
+
 def test_printed_summary_carries_units(case) -> None:
     relaxed = np.zeros((40, 2), dtype=bool)
     relaxed[[5, 6, 9], 1] = True
@@ -324,7 +356,7 @@ def test_printed_summary_carries_units(case) -> None:
             f"({100 * s['max_torque_jump_ratio']:.3g}% of its limit; {s['torque_jump_steps']} above 10%)") in text
     # the hint where it helps: jumps, and no acceleration limits to bound them
     s.update(torque_jump_steps=3, joint_acceleration_limits=False)
-    assert "3 above 10%), commanded accelerations up to" in describe(run)
+    assert "3 above 10%), the controller's joint accelerations up to" in describe(run)
     assert "(no limits.joint_acceleration: the velocity limits alone allow 2 q̇_max/T a step)" in describe(run)
     s.update(joint_acceleration_limits=True)
     assert "no limits.joint_acceleration" not in describe(run)
@@ -401,7 +433,7 @@ def test_plots_label_their_axes_and_keep_honest_scales(case) -> None:
     torques = external_torque_figure(run).axes
     low, high = torques[0].get_ylim()
     assert low <= -1.0 and high >= 1.0  # 0.03 Nm stays small on the page
-    assert torques[0].get_title() == f"joint1 (estimate off by ≤ {np.abs(residual[1:, 0]).max():.2g} Nm)"
+    assert torques[0].get_title() == f"joint1 (input off by ≤ {np.abs(residual[1:, 0]).max():.2g} Nm)"
 
     flat, _ = _summary(case, scaling=np.ones((steps, 3)))
     flat.label = "osc"

@@ -162,6 +162,24 @@ def test_a_push_within_a_control_period_is_logged_as_the_periods_mean_torque() -
     assert analyze(sim, log).summary["max_disturbance_torque"] == pytest.approx(np.abs(log.tau_ext_true[100]).max())
 
 
+def test_the_controllers_acceleration_is_the_one_its_limit_bounds() -> None:
+    """With external_torque: measured, limits.joint_acceleration bounds a = M_c⁻¹(τ + τ̂_ext − ν_c − g_c);
+    the summary held the runtime's q̈_cmd = M_c⁻¹(τ − ν_c − g_c) against it (1304 rad/s² where a stayed
+    within 250, a person pushing joints). With a model mismatch a is the controller's model's."""
+    limits = "joint_torque: {max: 300, allow_outside_urdf: true}\n  joint_acceleration: {max: 30}"
+    scenario = ("  duration: 0.3\n  model_mismatch: {mass_scale: 1.2}\n  disturbances:\n    - {type: joint_torque, "
+                "torque: [0, 20, 0, 0, -10, 0, 0], start: 0.05, duration: 0.2, ramp: 0.05}\n")
+    sim, log = simulate(spec_text(scenario, limits=limits))
+    model = sim.controller_robot.model
+    data = model.createData()
+    a = np.array([pin.aba(model, data, q, dq, tau + tau_ext)
+                  for q, dq, tau, tau_ext in zip(log.q, log.dq, log.tau, log.tau_ext_measured)])
+    assert np.abs(log.ddq_commanded).max() > 60.0  # (the premise: q̈_cmd alone is far beyond the limit)
+    assert np.all(log.status == 0)
+    assert np.abs(a).max() < 30.0 + 1e-6
+    assert analyze(sim, log).summary["max_controller_acceleration"] == pytest.approx(np.abs(a).max(), rel=1e-6)
+
+
 def test_unmodelled_payload_shows_up_in_measured_torque() -> None:
     scenario = "  duration: 1.0\n  payloads:\n    - {frame: tool, mass: 3.0, com: [0, 0, 0.05]}\n"
     sim, log = simulate(spec_text(scenario))

@@ -11,9 +11,11 @@ applied then, ramps included):
   max(0, |dᵀṗ| − v_max), m/s (ṗ the velocity of the bound frame's origin)
 - max_torque_jump = max_{k,j} |τ_j,k − τ_j,k−1|, Nm; `_ratio`: over τ_max,j; torque_jump_steps =
   #{k: |τ_j,k − τ_j,k−1| > TORQUE_JUMP_FRACTION τ_max,j for some j}: step-to-step chatter (a push or
-  a saturation can cause some); max_commanded_acceleration = max_{k,j} |q̈_cmd,j,k|, rad/s², and
-  joint_acceleration_limits: whether the spec bounds it (without, the velocity limits alone allow
-  up to 2 q̇_max/T a step)
+  a saturation can cause some); max_controller_acceleration = max_{k,j} |a_j,k|, rad/s², with
+  a = q̈_cmd + M_c⁻¹τ_ext,used = M_c⁻¹(τ + τ_ext,used − ν − g) the joint acceleration the controller
+  solved for (its model M_c, its τ_ext input: series.controller_acceleration), the one
+  limits.joint_acceleration bounds; joint_acceleration_limits: whether the spec bounds it
+  (without, the velocity limits alone allow up to 2 q̇_max/T a step)
 - solver_failures = #{k: status_k < 0}; limits_relaxed = #{k: status_k = 1}; relaxed_bounds: for
   each joint/Cartesian bound that gave way (keyed by its row name), the bound as validate words it,
   its number of steps and the first and last time; for a joint also `beyond`, which of its limits
@@ -32,9 +34,10 @@ applied then, ramps included):
   (max_k of the rest)
 - max_disturbance_torque = max_{k,j} |τ_dist,j,k + τ_payload,j,k|: pushes, joint torques and the
   payloads the controller does not know (series.payload_torque), all external to its model
-- max_external_torque_estimate_error = max_{k,j} |τ̂_ext,j,k+1 − (τ_dist + τ_payload)_j,k|: how far
-  the controller's τ_ext input was from that (one step late: a motion-based estimate needs the step's
-  acceleration); the model mismatch, sensor noise and bias, or all of it with `ignored` sensing
+- max_external_torque_estimate_error = max_{k,j} |τ_ext,used,j,k+1 − (τ_dist + τ_payload)_j,k|: how
+  far the τ_ext the controller used was from that (one step late: a motion-based estimate needs the
+  step's acceleration); the model mismatch, sensor noise and bias, or all of it when the scenario's
+  sensing or the controller's external_torque is `ignored` (the controller then uses 0)
 - min_distances[pair] = min_k d_pair,k, the signed distance of each watched collision pair (m);
   collision_violations[pair]: for each pair closer than its minimum d_min at some sample, by how
   much at worst (max_k d_min − d_k, m), for how many steps, the first and last time;
@@ -111,7 +114,7 @@ def summarize(log: SimulationLog, series: TimeSeries, robot: Robot, priorities: 
         "max_torque_jump": _peak(torque_jump),
         "max_torque_jump_ratio": _peak(torque_jump / lim.tau_max[1:]),
         "torque_jump_steps": int(np.count_nonzero((torque_jump > TORQUE_JUMP_FRACTION * lim.tau_max[1:]).any(axis=1))),
-        "max_commanded_acceleration": _peak(np.abs(log.ddq_commanded)),
+        "max_controller_acceleration": _peak(np.abs(series.controller_acceleration)),
         "joint_acceleration_limits": bool(np.isfinite(lim.a_max).any()),
         "solver_failures": int(np.count_nonzero(log.status < 0)),
         "limits_relaxed": int(np.count_nonzero(log.status == STATUS_LIMITS_RELAXED)),
@@ -130,7 +133,7 @@ def summarize(log: SimulationLog, series: TimeSeries, robot: Robot, priorities: 
         "task_space_kinetic_energy_peak": _peak(series.task_kinetic_energy),
         "null_space_kinetic_energy_peak": _peak(series.null_kinetic_energy),
         "max_disturbance_torque": _peak(np.abs(disturbance)),
-        "max_external_torque_estimate_error": _peak(np.abs(log.tau_ext_measured[1:] - disturbance[:-1])),
+        "max_external_torque_estimate_error": _peak(np.abs(series.tau_ext_used[1:] - disturbance[:-1])),
         "waypoints_total": int(waypoints.size),
         "waypoints_reached": int(np.count_nonzero(np.isfinite(waypoints))) if waypoints.size else None,
         "waypoint_times": [None if math.isnan(t) else float(t) for t in waypoints],

@@ -126,26 +126,26 @@ def joint_figure(run: RunResult, values: np.ndarray, lower: np.ndarray, upper: n
 
 def external_torque_figure(run: RunResult) -> Figure:
     """Applied external torque (disturbances and the payloads the controller does not know) and
-    the controller's τ_ext input, each joint on a scale of at least ±MIN_TORQUE_RANGE; the title
-    gives how far the input was off (one step late, see metrics)."""
+    the τ_ext the controller used (0 when it ignores τ_ext), each joint on a scale of at least
+    ±MIN_TORQUE_RANGE; the title gives how far that input was off (one step late, see metrics)."""
     names, t = run.robot.joint_names, run.log.time
     applied = run.log.tau_ext_true + run.series.payload_torque
-    measured = run.log.tau_ext_measured
-    title = f"external joint torque: applied (disturbances, payloads) vs the τ_ext estimate (the controller input) — {run.label}"
+    used = run.series.tau_ext_used
+    title = f"external joint torque: applied (disturbances, payloads) vs the τ_ext the controller used — {run.label}"
     figure, axes = joint_grid(len(names), title)
     for j, ax in enumerate(axes):
         ax.plot(t, applied[:, j], lw=1.0, label="applied")
         if np.any(run.series.payload_torque[:, j]):
             ax.plot(t, run.series.payload_torque[:, j], lw=0.8, ls=":", label="of which payloads")
-        ax.plot(t, measured[:, j], lw=1.0, ls="--", label="estimate (controller input)")
+        ax.plot(t, used[:, j], lw=1.0, ls="--", label="controller input (τ_ext used)")
         ax.axhline(0.0, color="0.6", lw=0.5)
-        both = np.concatenate([applied[:, j], measured[:, j]])
+        both = np.concatenate([applied[:, j], used[:, j]])
         ax.set_ylim(min(1.08 * float(np.min(both, initial=0.0)), -MIN_TORQUE_RANGE),
                     max(1.08 * float(np.max(both, initial=0.0)), MIN_TORQUE_RANGE))
         unit = joint_quantity_unit(run, j, None)
-        off = float(np.max(np.abs(measured[1:, j] - applied[:-1, j]), initial=0.0))
+        off = float(np.max(np.abs(used[1:, j] - applied[:-1, j]), initial=0.0))
         ax.set_ylabel(f"τ_ext [{unit}]")
-        ax.set_title(f"{names[j]} (estimate off by ≤ {off:.2g} {unit})", fontsize=9)
+        ax.set_title(f"{names[j]} (input off by ≤ {off:.2g} {unit})", fontsize=9)
     axes[0].legend(fontsize=8)
     return figure
 

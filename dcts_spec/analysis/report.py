@@ -45,7 +45,7 @@ def describe(run: RunResult) -> str:
                  + (f", collision {q('max_collision_violation')}" if "max_collision_violation" in s else ""))
     smoothness = (f"  smoothness torque steps between periods up to {q('max_torque_jump')} "
                   f"({100 * s['max_torque_jump_ratio']:.3g}% of its limit; {s['torque_jump_steps']} above "
-                  f"{100 * TORQUE_JUMP_FRACTION:g}%), commanded accelerations up to {q('max_commanded_acceleration')}")
+                  f"{100 * TORQUE_JUMP_FRACTION:g}%), the controller's joint accelerations up to {q('max_controller_acceleration')}")
     if s["torque_jump_steps"] and not s["joint_acceleration_limits"]:
         smoothness += " (no limits.joint_acceleration: the velocity limits alone allow 2 q̇_max/T a step)"
     lines.append(smoothness)

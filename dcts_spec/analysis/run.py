@@ -57,7 +57,7 @@ def analyze(sim: Simulation, log: SimulationLog, label: str | None = None,
             problem: ControlProblem | None = None) -> RunResult:
     """Derive the time series and the summary of a finished run of `sim` (`problem`: see `evaluate`)."""
     spec, robot = sim.spec, sim.robot
-    series = evaluate(spec, robot, log, problem)
+    series = evaluate(spec, robot, log, problem, sim.controller_robot)
     priorities = list(sim.runtime.priorities)
     summary = {
         "spec": spec.name,

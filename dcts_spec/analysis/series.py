@@ -44,6 +44,8 @@ class TimeSeries:
     null_kinetic_energy: np.ndarray  # the rest
     acceleration_energy: np.ndarray  # ½ (τ − g)ᵀ M⁻¹ (τ − g)
     payload_torque: np.ndarray  # (N, n) joint torque the scenario's payloads exert (0 without)
+    tau_ext_used: np.ndarray  # (N, n) the τ_ext the controller used: the measured one, 0 if it ignores it
+    controller_acceleration: np.ndarray  # (N, n) a = M_c⁻¹(τ + τ_ext,used − ν_c − g_c): what joint_acceleration bounds
     damping: tuple[str, ...]  # pure damping tasks: their task_errors are velocity errors
     task_units: dict[str, str]  # task → unit of its task_errors rows ("m", "rad", "rad/s", "m, rad")
     level_tasks: dict[int, tuple[str, ...]]  # priority → its tasks
@@ -56,15 +58,17 @@ class TimeSeries:
         out |= {f"acceleration_error_{k}": v for k, v in self.acceleration_errors.items()}
         out |= {f"position_{k}": v for k, v in self.frame_positions.items()}
         for name in ("kinetic_energy", "task_kinetic_energy", "null_kinetic_energy", "acceleration_energy",
-                     "payload_torque"):
+                     "payload_torque", "tau_ext_used", "controller_acceleration"):
             out[name] = getattr(self, name)
         return out
 
 
-def evaluate(spec: Spec, robot: Robot, log: SimulationLog, problem: ControlProblem | None = None) -> TimeSeries:
+def evaluate(spec: Spec, robot: Robot, log: SimulationLog, problem: ControlProblem | None = None,
+             controller_robot: Robot | None = None) -> TimeSeries:
     """Derived time series of a run of `spec` on `robot` (the simulated robot). `problem`: the
     spec's symbolic problem on that robot if the caller has it (building it is most of the time
-    of a short run's analysis; a campaign's samples share it)."""
+    of a short run's analysis; a campaign's samples share it). `controller_robot`: the model the
+    controller was built on, if it differs (model mismatch)."""
     problem = problem or build_problem(spec, robot)
     n, samples = problem.n, log.steps
     a = ca.SX.sym("a", n)
@@ -116,8 +120,11 @@ def evaluate(spec: Spec, robot: Robot, log: SimulationLog, problem: ControlProbl
     effort = log.tau - out["g"]
     acceleration_energy = 0.5 * np.einsum("ki,ki->k", effort, np.linalg.solve(M, effort[..., None])[..., 0])
     payloads = spec.scenario.payloads if spec.scenario is not None else []
+    # (problem.py: with `ignored` the controller's tasks and limits take τ_ext = 0, whatever it is given)
+    used = log.tau_ext_measured if spec.controller.external_torque == "measured" else np.zeros_like(log.tau)
     return TimeSeries(task_errors, acceleration_errors, positions, velocities, kinetic, task_kinetic,
-                      kinetic - task_kinetic, acceleration_energy, payload_torque(robot, payloads, log),
+                      kinetic - task_kinetic, acceleration_energy, payload_torque(robot, payloads, log), used,
+                      controller_acceleration(controller_robot or robot, log, used),
                       tuple(damping), task_error_units(levels, robot), level_tasks, level_units(levels, robot),
                       limits_in_force(problem.param_layout, param, robot))
 
@@ -139,6 +146,20 @@ def payload_torque(robot: Robot, payloads: Sequence[Payload], log: SimulationLog
     for k in range(log.steps):
         out[k] = pin.rnea(model, data, log.q[k], log.dq[k], log.ddq[k]) - pin.rnea(
             loaded, loaded_data, log.q[k], log.dq[k], log.ddq[k])
+    return out
+
+
+def controller_acceleration(controller: Robot, log: SimulationLog, tau_ext_used: np.ndarray) -> np.ndarray:
+    """The joint acceleration the controller solved for at each step, with its model and its τ_ext
+    input: a = q̈_cmd + M_c(q)⁻¹ τ_ext,used, where q̈_cmd = M_c⁻¹(τ − ν_c − g_c) is the one the runtime
+    returns (docs/formulations.md). The joint acceleration limits bound a, not q̈_cmd."""
+    out = log.ddq_commanded.copy()
+    model = controller.model
+    data = model.createData()
+    for k in np.flatnonzero(np.any(tau_ext_used != 0.0, axis=1)):
+        M = pin.crba(model, data, log.q[k])
+        # (Pinocchio 3 may fill the upper triangle only: pin>=3.0 is what the package accepts)
+        out[k] += np.linalg.solve(np.triu(M) + np.triu(M, 1).T, tau_ext_used[k])
     return out
 
 

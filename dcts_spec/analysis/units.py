@@ -105,7 +105,7 @@ def run_units(task_units: dict[str, str], levels: dict[int, str], robot: Robot) 
         "max_joint_velocity_violation": per(joint, "s"),
         "max_torque_violation": torque_unit(robot),
         "max_torque_jump": torque_unit(robot),
-        "max_commanded_acceleration": per(joint, "s²"),
+        "max_controller_acceleration": per(joint, "s²"),
         "max_disturbance_torque": torque_unit(robot),
         "max_external_torque_estimate_error": torque_unit(robot),
         "relaxed_bounds": {"steps": "steps", "first": "s", "last": "s"},
