@@ -9,6 +9,9 @@ import numpy as np
 import pinocchio as pin
 import pytest
 from reference import dynamics
+from test_validate import LIFT_URDF
+
+from dcts_spec import load_spec
 
 from dcts_spec.analysis.compare import markdown_table, scaling_overlay, table_rows
 from dcts_spec.analysis.metrics import SUMMARY_KEYS, json_ready, summarize, summary_units
@@ -340,6 +343,33 @@ def test_the_tau_ext_metrics_are_of_the_input_the_controller_used(case, text: st
     line = next(line for line in axes.lines if line.get_label() == "controller input (τ_ext used)")
     np.testing.assert_array_equal(line.get_ydata(), input_torque[:, 3])
     assert axes.get_title() == f"joint4 (input off by ≤ {0.0 if used else 12.0:.2g} Nm)"
+
+
+def test_a_peak_over_joints_is_printed_in_the_unit_of_its_joint(tmp_path: Path) -> None:
+    """On a lift (prismatic) with two revolute joints the run's line read "torque 0 N, Nm" and
+    "velocity 0.1 m/s, rad/s (…)": a peak over the joints is in the unit of the joint where it is
+    reached (summary worst_joints), and a 0 is reached at none."""
+    (tmp_path / "lift.urdf").write_text(LIFT_URDF)
+    (tmp_path / "lift.yaml").write_text("version: 1\nname: lift\nrobot: {urdf: lift.urdf}\ntasks:\n  - {name: posture, "
+                                        "type: joint, priority: 1, gains: {kp: 10, kd: 6}, reference: {q: [0.2, 0, 0]}}\n")
+    spec = load_spec(tmp_path / "lift.yaml")
+    robot = validate_spec(spec).robot
+    log = SimulationLog.allocate(10, 3, 0, 1, 0.001)
+    log.q[:] = [0.2, 0.0, 0.0]
+    log.scaling[:] = 1.0
+    log.dq[4] = [0.4, 0.0, 0.0]  # the lift 0.1 m/s beyond its 0.3 m/s
+
+    def line() -> str:
+        series = evaluate(spec, robot, log)
+        summary = summarize(log, series, robot, [1]) | {"spec": "lift", "formulation": "dcts", "runtime": "python"}
+        summary["units"] = summary_units(summary, series, robot)
+        assert summary["units"]["max_torque_violation"] == "N, Nm"  # (summary.json: the unit of every joint's)
+        return next(text for text in describe(RunResult("dcts", robot, log, series, summary, [1], {})).splitlines()
+                    if "worst excess" in text)
+
+    assert "velocity 0.1 m/s (33.3% of its limit), torque 0, " in line()
+    log.dq[6] = [0.0, 2.5, 0.0]  # the shoulder 0.5 rad/s beyond its 2 rad/s
+    assert "velocity 0.5 rad/s (" in line()
 
 
 def test_printed_summary_carries_units(case) -> None:

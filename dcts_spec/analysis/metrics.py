@@ -43,6 +43,7 @@ applied then, ramps included):
   much at worst (max_k d_min − d_k, m), for how many steps, the first and last time;
   max_collision_violation = the largest of those (0 when every pair kept its minimum)
 - waypoints_reached = points reached (None without waypoints); waypoint_times: when each was, or None
+- worst_joints[metric] = the joint where each per-joint maximum above is reached (None where it is 0)
 - realtime_factor = simulated time / wall time of the simulation loop (controller, physics and
   logging; not the viewer, video or progress display)
 
@@ -98,23 +99,33 @@ def summarize(log: SimulationLog, series: TimeSeries, robot: Robot, priorities: 
     waypoints = log.waypoint_times
     disturbance = log.tau_ext_true + series.payload_torque
     torque_jump = np.abs(np.diff(log.tau, axis=0))
+    per_joint = {  # (samples, joints) whose peak is a metric
+        "max_joint_position_violation": position_excess,
+        "max_joint_velocity_violation": velocity_excess,
+        "max_torque_violation": _excess(np.abs(log.tau), lim.tau_max),
+        "max_torque_jump": torque_jump,
+        "max_controller_acceleration": np.abs(series.controller_acceleration),
+        "max_disturbance_torque": np.abs(disturbance),
+        "max_external_torque_estimate_error": np.abs(series.tau_ext_used[1:] - disturbance[:-1]),
+    }
+    peak = {key: _peak(values) for key, values in per_joint.items()}
     summary: dict[str, Any] = {
         "duration": log.duration,
         "steps": log.steps,
         "completed": log.diverged_at is None,
         "diverged_at": log.diverged_at,
-        "max_joint_position_violation": _peak(position_excess),
-        "max_joint_velocity_violation": _peak(velocity_excess),
+        "max_joint_position_violation": peak["max_joint_position_violation"],
+        "max_joint_velocity_violation": peak["max_joint_velocity_violation"],
         "max_joint_velocity_violation_ratio": _peak(velocity_excess / lim.v_max),
-        "max_torque_violation": _peak(_excess(np.abs(log.tau), lim.tau_max)),
+        "max_torque_violation": peak["max_torque_violation"],
         "max_cartesian_violation": _cartesian_violation(series, robot),
         "max_cartesian_velocity_violation": _peak(np.array([
             _peak(_excess(np.abs(b.coordinate(series.frame_velocities[b.frame])), np.array(b.v_max)))
             for b in robot.cartesian_bounds if np.isfinite(b.v_max)])),
-        "max_torque_jump": _peak(torque_jump),
+        "max_torque_jump": peak["max_torque_jump"],
         "max_torque_jump_ratio": _peak(torque_jump / lim.tau_max[1:]),
         "torque_jump_steps": int(np.count_nonzero((torque_jump > TORQUE_JUMP_FRACTION * lim.tau_max[1:]).any(axis=1))),
-        "max_controller_acceleration": _peak(np.abs(series.controller_acceleration)),
+        "max_controller_acceleration": peak["max_controller_acceleration"],
         "joint_acceleration_limits": bool(np.isfinite(lim.a_max).any()),
         "solver_failures": int(np.count_nonzero(log.status < 0)),
         "limits_relaxed": int(np.count_nonzero(log.status == STATUS_LIMITS_RELAXED)),
@@ -132,11 +143,12 @@ def summarize(log: SimulationLog, series: TimeSeries, robot: Robot, priorities: 
         "kinetic_energy_peak": _peak(series.kinetic_energy),
         "task_space_kinetic_energy_peak": _peak(series.task_kinetic_energy),
         "null_space_kinetic_energy_peak": _peak(series.null_kinetic_energy),
-        "max_disturbance_torque": _peak(np.abs(disturbance)),
-        "max_external_torque_estimate_error": _peak(np.abs(series.tau_ext_used[1:] - disturbance[:-1])),
+        "max_disturbance_torque": peak["max_disturbance_torque"],
+        "max_external_torque_estimate_error": peak["max_external_torque_estimate_error"],
         "waypoints_total": int(waypoints.size),
         "waypoints_reached": int(np.count_nonzero(np.isfinite(waypoints))) if waypoints.size else None,
         "waypoint_times": [None if math.isnan(t) else float(t) for t in waypoints],
+        "worst_joints": {key: _worst_joint(values, robot) for key, values in per_joint.items()},
         "wall_time": log.wall_time,
         "realtime_factor": log.duration / log.wall_time if log.wall_time > 0 else None,
     }
@@ -256,6 +268,14 @@ def _excess(values: np.ndarray, bound: np.ndarray) -> np.ndarray:
 
 def _peak(values: np.ndarray, reduce=np.max, default: float = 0.0) -> float:
     return float(reduce(values)) if values.size else default
+
+
+def _worst_joint(values: np.ndarray, robot: Robot) -> str | None:
+    """The joint of the largest of (samples, joints) values (None if all are 0): its unit is the
+    peak's on a robot that mixes revolute and prismatic joints."""
+    if not values.size or values.max() <= 0.0:
+        return None
+    return robot.joint_names[int(np.argmax(values)) % values.shape[1]]
 
 
 def _mean_norm(errors: np.ndarray) -> float:

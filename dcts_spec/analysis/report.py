@@ -6,14 +6,27 @@ from typing import Any
 
 from .metrics import TORQUE_JUMP_FRACTION
 from .run import RunResult
+from .units import joint_peak_units
 
 
 def quantity(value: float | None, unit: str) -> str:
-    """`0.012 rad`, `3 steps`; a ratio ("1") without a unit; – for a missing value."""
+    """`0.012 rad`, `3 steps`; a ratio ("1") or a bare number ("") without a unit; – for a missing value."""
     if value is None:
         return "–"
     number = f"{value:.3g}"
-    return number if unit == "1" else f"{number} {unit}"
+    return number if unit in ("1", "") else f"{number} {unit}"
+
+
+def peak_unit(run: RunResult, key: str) -> str:
+    """The unit of a summary entry; for a peak over joints on a robot that mixes revolute and
+    prismatic joints ("N, Nm"), that of the joint where it is reached, or none for a 0 (no joint)."""
+    unit = run.summary["units"][key]
+    worst = run.summary.get("worst_joints", {})
+    if key not in worst or ", " not in unit:
+        return unit
+    if worst[key] is None:
+        return ""
+    return joint_peak_units(run.robot, [run.robot.joint_names.index(worst[key])])[key]
 
 
 def min_scaling_text(summary: dict[str, Any]) -> str:
@@ -27,7 +40,7 @@ def min_scaling_text(summary: dict[str, Any]) -> str:
 
 def describe(run: RunResult) -> str:
     """A few lines about a run for the terminal."""
-    s, u = run.summary, run.summary["units"]
+    s = run.summary
     speed = f" ({s['realtime_factor']:.3g}× real time)" if s["realtime_factor"] else ""
     lines = [f"{s['spec']}: {s['formulation']}, {s['runtime']} runtime — {s['duration']:.3g} s simulated in "
              f"{s['wall_time']:.3g} s{speed}"]
@@ -35,7 +48,7 @@ def describe(run: RunResult) -> str:
         lines.append(f"  UNSTABLE   MuJoCo stopped the run at t = {s['diverged_at']:.4g} s")
 
     def q(key: str) -> str:
-        return quantity(s[key], u[key])
+        return quantity(s[key], peak_unit(run, key))
 
     lines.append(f"  limits     worst excess: position {q('max_joint_position_violation')}, velocity "
                  f"{q('max_joint_velocity_violation')} ({100 * s['max_joint_velocity_violation_ratio']:.3g}% "

@@ -69,6 +69,23 @@ def torque_unit(robot: Robot) -> str:
     return combine(joint_force_unit(robot, j) for j in range(robot.nv))
 
 
+def joint_peak_units(robot: Robot, joints: Sequence[int] | None = None) -> dict[str, str]:
+    """The unit of each summary entry that is a peak over joints (metrics.summarize's per_joint),
+    over `joints` (all by default): "Nm", "N" or "N, Nm" for a torque."""
+    joints = range(robot.nv) if joints is None else joints
+    position = joints_unit(robot, joints)
+    force = combine(joint_force_unit(robot, j) for j in joints)
+    return {
+        "max_joint_position_violation": position,
+        "max_joint_velocity_violation": per(position, "s"),
+        "max_torque_violation": force,
+        "max_torque_jump": force,
+        "max_controller_acceleration": per(position, "s²"),
+        "max_disturbance_torque": force,
+        "max_external_torque_estimate_error": force,
+    }
+
+
 def task_unit(task: Task, robot: Robot) -> str:
     """The unit of a task's rows: "m" (translation axes), "rad" (rotation axes, joints), or both."""
     if isinstance(task, JointTask):
@@ -97,17 +114,10 @@ def level_units(levels: Sequence[Level], robot: Robot) -> dict[int, str]:
 def run_units(task_units: dict[str, str], levels: dict[int, str], robot: Robot) -> dict[str, Any]:
     """The unit of every numeric entry a run's summary can have (per task or level for the nested
     ones); `summary_units` keeps those of one summary, a campaign's report those of its columns."""
-    joint = joints_unit(robot)
     level_accelerations = {str(p): per(u, "s²") for p, u in levels.items()}
     return {
         **FIXED_UNITS,
-        "max_joint_position_violation": joint,
-        "max_joint_velocity_violation": per(joint, "s"),
-        "max_torque_violation": torque_unit(robot),
-        "max_torque_jump": torque_unit(robot),
-        "max_controller_acceleration": per(joint, "s²"),
-        "max_disturbance_torque": torque_unit(robot),
-        "max_external_torque_estimate_error": torque_unit(robot),
+        **joint_peak_units(robot),
         "relaxed_bounds": {"steps": "steps", "first": "s", "last": "s"},
         "min_distances": "m",
         "collision_violations": {"min_distance": "m", "by": "m", "steps": "steps", "first": "s", "last": "s"},

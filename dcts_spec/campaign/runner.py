@@ -34,7 +34,7 @@ from .scenario import JointRange, sample_spec_data
 # Summary entries that are not one number per run (or are about the machine, not the controller).
 NOT_METRICS = {"units", "relaxed_bounds", "collision_violations", "min_scaling_at", "waypoint_times",
                "task_error_quantity", "mean_acceleration_error", "min_distances", "spec", "runtime", "period",
-               "substeps", "integrator", "external_torque_sensing", "realtime_factor"}
+               "substeps", "integrator", "external_torque_sensing", "realtime_factor", "worst_joints"}
 
 
 @dataclass(frozen=True)
