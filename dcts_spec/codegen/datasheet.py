@@ -329,7 +329,9 @@ def parameters_doc_text(controller: Controller, name: str) -> str:
     if any(e.name.endswith(".activation") for e in layout.entries):
         lines += wrap("activation: 1 = the task as compiled; 0 = as if it were not in the spec (it neither moves "
                       "the robot nor takes directions from the levels below); in between the task applies that "
-                      "fraction of its correction and leaves the rest of its directions to the levels below.")
+                      "fraction of its correction and leaves the rest of its directions to the levels below. (A lowest "
+                      "level compiled as least squares stays so with the levels above off; where a bound binds, "
+                      "it then differs from the spec without them.)")
     return "\n".join(lines)
 
 
