@@ -472,3 +472,19 @@ def test_plots_label_their_axes_and_keep_honest_scales(case) -> None:
     assert [line.get_label() for line in overlay[1].lines if len(line.get_xdata())] == ["dcts"]
     assert "osc: never scaled" in overlay[1].get_legend_handles_labels()[1]
     assert overlay[0].get_legend_handles_labels()[1] == ["dcts: never scaled", "osc: never scaled"]
+
+
+def test_a_closed_form_reports_its_bounds_unchecked_not_held():
+    """osc and the projector have no bound rows, so their status is 0 whatever the bounds: a run of
+    osc that crossed a Cartesian bound by 0.07 m and a joint limit by 0.1 rad said "0 steps with
+    relaxed limits", next to dcts's count in `dcts compare` (found from outside)."""
+    from dcts_spec.analysis.run import analyze
+    from dcts_spec.sim.runner import prepare_simulation
+
+    spec = load_spec(Path(__file__).resolve().parents[1] / "specs" / "minimal.yaml")
+    for formulation, checked in (("osc", False), ("dcts", True)):
+        sim = prepare_simulation(spec, "python", formulation, duration=0.05)
+        run = analyze(sim, sim.run())
+        assert run.summary["bounds_checked"] is checked
+        assert (run.summary["limits_relaxed"] is None) is not checked
+        assert ("bounds not checked (osc is a closed form" in describe(run)) is not checked

@@ -319,6 +319,7 @@ class _WithoutFeedForward:
 
     def __init__(self, inner):
         self.inner, self.n, self.ref_layout, self.priorities = inner, inner.n, inner.ref_layout, inner.priorities
+        self.nx = inner.nx
         self.cut = np.concatenate([np.arange(r.offset, r.offset + r.size) for r in inner.ref_layout
                                    if r.field in ("velocity", "acceleration")])
 
@@ -413,7 +414,7 @@ def test_input_references_without_waypoints_hold_their_initial_value() -> None:
 class _Exploding:
     """A runtime that commands absurd torques: MuJoCo gives up."""
 
-    n, ref_layout, priorities = 7, [], [1, 2]
+    n, nx, ref_layout, priorities = 7, 0, [], [1, 2]
 
     def step(self, q, dq, tau_ext=None, ref=None) -> StepResult:
         return StepResult(np.full(7, 1e15), np.zeros(7), np.ones(2), 0, np.zeros(0))

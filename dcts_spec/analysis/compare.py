@@ -23,6 +23,7 @@ TABLE_METRICS = (
     "max_torque_violation",
     "max_cartesian_violation",
     "solver_failures",
+    "bounds_checked",
     "limits_relaxed",
     "min_scaling",
     "task_rms_error",

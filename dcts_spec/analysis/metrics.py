@@ -16,7 +16,9 @@ applied then, ramps included):
   solved for (its model M_c, its τ_ext input: series.controller_acceleration), the one
   limits.joint_acceleration bounds; joint_acceleration_limits: whether the spec bounds it
   (without, the velocity limits alone allow up to 2 q̇_max/T a step)
-- solver_failures = #{k: status_k < 0}; limits_relaxed = #{k: status_k = 1}; relaxed_bounds: for
+- solver_failures = #{k: status_k < 0}; limits_relaxed = #{k: status_k = 1}, None for a formulation
+  that checks no joint or Cartesian bound (osc, projector: closed forms; run.py, bounds_checked: false),
+  whose status is 0 whatever its bounds; relaxed_bounds: for
   each joint/Cartesian bound that gave way (keyed by its row name), the bound as validate words it,
   its number of steps and the first and last time; for a joint also `beyond`, which of its limits
   (position, velocity) its state was beyond in those steps and by how much at most

@@ -62,8 +62,10 @@ def describe(run: RunResult) -> str:
     if s["torque_jump_steps"] and not s["joint_acceleration_limits"]:
         smoothness += " (no limits.joint_acceleration: the velocity limits alone allow 2 q̇_max/T a step)"
     lines.append(smoothness)
-    lines.append(f"  solver     {s['solver_failures']} failures, {s['limits_relaxed']} steps with relaxed limits, "
-                 f"min scaling {min_scaling_text(s)}")
+    relaxed = (f"{s['limits_relaxed']} steps with relaxed limits" if s["limits_relaxed"] is not None else
+               f"joint and Cartesian bounds not checked ({s['formulation']} is a closed form: its torque is clipped, "
+               "its bounds are not rows; see the worst excess above)")
+    lines.append(f"  solver     {s['solver_failures']} failures, {relaxed}, min scaling {min_scaling_text(s)}")
     for r in s.get("relaxed_bounds", {}).values():
         beyond = f"; beyond {r['beyond']}" if "beyond" in r else ""
         lines.append(f"  relaxed    {r['bound']}: {r['steps']} steps between t = {r['first']:.4g} s and {r['last']:.4g} s"

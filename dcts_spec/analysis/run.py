@@ -71,6 +71,11 @@ def analyze(sim: Simulation, log: SimulationLog, label: str | None = None,
     }
     collision = sim.collision
     summary |= summarize(log, series, robot, priorities, collision)
+    # A closed form (osc, projector) has no joint or Cartesian bound rows: no step of it is checked,
+    # so none is "relaxed" (its status is 0 whatever the bounds: a count of 0 read as "held")
+    summary["bounds_checked"] = bool(sim.runtime.nx)
+    if not summary["bounds_checked"]:
+        summary["limits_relaxed"] = None
     distances = pair_distances(collision, robot, log.q)
     summary |= collision_metrics(collision, distances, log.time)
     summary["units"] = summary_units(summary, series, robot)

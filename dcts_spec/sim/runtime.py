@@ -37,6 +37,9 @@ class Runtime(Protocol):
     def priorities(self) -> list[int]: ...
 
     @property
+    def nx(self) -> int: ...  # QP variables: 0 for a closed form (osc, projector), which checks no bound
+
+    @property
     def param_layout(self) -> ParameterLayout: ...
 
     def set_params(self, values: dict | np.ndarray) -> None: ...
