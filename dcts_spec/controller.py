@@ -241,7 +241,7 @@ class Controller:
     def reset_params(self) -> None:
         """Back to the compiled values at once (no ramp), as a freshly initialized controller."""
         layout = self.param_layout
-        self._ramp = ParameterRamp(layout.defaults, ramp_steps(layout.ramp_time, self.problem.period))
+        self._ramp = ParameterRamp(layout.defaults, ramp_steps(layout.ramp_time, self.problem.period), layout.periodic)
 
     def torque_limit(self, param: np.ndarray) -> np.ndarray:
         """|τ| ≤ this with the parameter values `param` (the compiled limit where there is none)."""

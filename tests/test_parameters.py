@@ -188,3 +188,33 @@ def test_limits_keep_their_compiled_structure():
     # (the tool's activation frees its 3 directions for the posture below: 3 more null-space variables)
     assert param.nx == plain.nx + 3
     validate_spec(param.spec)
+
+
+ORIENTED = {**SPEC, "tasks": [
+    {"name": "tool", "type": "position", "frame": "tool", "priority": 1, "gains": {"kp": 100, "kd": 20},
+     "reference": {"position": [0.5, 0.1, 0.6]}},
+    {"name": "grip", "type": "orientation", "frame": "tool", "priority": 1, "gains": {"kp": 400, "kd": 40},
+     "reference": {"rpy": [3.1, 0.0, 3.1]}},
+    {"name": "posture", "type": "joint", "priority": 2, "gains": {"kp": 0, "kd": 5}},
+]}
+
+
+@pytest.mark.parametrize(("rpy", "largest_step"), [
+    ([3.1 - 2 * np.pi, 0.0, 3.1], 1e-9),  # the same orientation as [3.1, 0, 3.1]
+    ([3.1, 0.0, -3.1], 5.0),  # a turn of 0.083 rad about z
+])
+def test_an_orientation_reference_is_ramped_the_short_way_round(rpy, largest_step):
+    """A roll, pitch or yaw ramped angle by angle swept the target through far orientations: the
+    same orientation written as -π + 0.04 instead of 3.1 turned it a full turn (torque steps of up
+    to 149 Nm), yaw 3.1 → -3.1, a 0.083 rad turn, stepped the torque by 65 Nm (found from outside).
+    Each angle's target is now taken within π of where the ramp is."""
+    data = yaml.safe_load(yaml.safe_dump(ORIENTED))
+    data["parameters"] = {"tasks": {"grip": ["reference"]}}
+    c = build_controller(load_spec_text(yaml.safe_dump(data), "oriented.yaml"))
+    before = c.step(Q, DQ).tau
+    c.set_params({"grip.rpy": rpy})
+    torques = np.array([before] + [c.step(Q, DQ).tau for _ in range(8)])
+    assert np.abs(np.diff(torques, axis=0)).max() <= largest_step
+    target = np.array(c.params()["grip.rpy"])
+    assert np.allclose(np.mod(target - np.array(rpy) + np.pi, 2 * np.pi) - np.pi, 0.0, atol=1e-12)  # (equivalent)
+    assert np.abs(target - [3.1, 0.0, 3.1]).max() <= np.pi

@@ -13,7 +13,7 @@ from dcts_spec.codegen import compile_c
 from dcts_spec.controller import build_controller
 from dcts_spec.formulations.parameters import ParameterError
 
-from test_parameters import ALL, DQ, Q, SPEC
+from test_parameters import ALL, DQ, ORIENTED, Q, SPEC
 
 
 @pytest.fixture(autouse=True)
@@ -99,3 +99,21 @@ def test_activations_above_a_least_squares_posture_pass_the_golden_vectors(tmp_p
     compiled.close()
     golden = json.loads((tmp_path / "bundle" / "golden.json").read_text())
     assert golden["vectors"] and json.loads((tmp_path / "bundle" / "manifest.json").read_text())["built"]
+
+
+def test_c_ramps_an_orientation_reference_the_short_way_round_as_python_does(tmp_path):
+    """The C set_params takes each roll, pitch and yaw within π of where the ramp is, as
+    ParameterRamp does: the same target (get_params) and the same torques through the ramp."""
+    data = yaml.safe_load(yaml.safe_dump(ORIENTED))
+    data["parameters"] = {"tasks": {"grip": ["reference"]}}
+    (tmp_path / "oriented.yaml").write_text(yaml.safe_dump(data))
+    compiled, python = compile_c(tmp_path / "oriented.yaml", tmp_path / "bundle"), build_controller(tmp_path / "oriented.yaml")
+    taus = {id(compiled): [], id(python): []}
+    for k in range(20):
+        for runtime in (compiled, python):
+            if k == 2:
+                runtime.set_params({"grip.rpy": [3.1 - 2 * np.pi, 0.0, -3.1]})
+            taus[id(runtime)].append(runtime.step(Q, DQ).tau)
+    assert compiled.params()["grip.rpy"] == python.params()["grip.rpy"] == [3.1, 0.0, 2 * np.pi - 3.1]
+    np.testing.assert_allclose(taus[id(compiled)], taus[id(python)], rtol=1e-6, atol=1e-6)
+    compiled.close()

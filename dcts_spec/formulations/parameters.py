@@ -59,16 +59,18 @@ class ParameterInput:
     lower: tuple[float, ...]
     upper: tuple[float, ...]
     lower_open: bool = False  # the value must exceed `lower` (a velocity limit)
+    periodic: bool = False  # angles of period 2π (roll, pitch, yaw): a ramp takes the short way round
 
     def to_dict(self) -> dict:
         return {"name": self.name, "c_name": self.c_name, "offset": self.offset, "size": self.size, "unit": self.unit,
                 "components": list(self.components), "default": list(self.default), "lower": list(self.lower),
-                "upper": list(self.upper), "lower_open": self.lower_open}
+                "upper": list(self.upper), "lower_open": self.lower_open, "periodic": self.periodic}
 
     @staticmethod
     def from_dict(d: dict) -> "ParameterInput":
         return ParameterInput(d["name"], d["c_name"], d["offset"], d["size"], d["unit"], tuple(d["components"]),
-                              tuple(d["default"]), tuple(d["lower"]), tuple(d["upper"]), bool(d["lower_open"]))
+                              tuple(d["default"]), tuple(d["lower"]), tuple(d["upper"]), bool(d["lower_open"]),
+                              bool(d.get("periodic", False)))
 
     @property
     def slice(self) -> slice:
@@ -92,6 +94,11 @@ class ParameterLayout:
     @property
     def defaults(self) -> np.ndarray:
         return np.array([v for e in self.entries for v in e.default], dtype=float)
+
+    @property
+    def periodic(self) -> np.ndarray:
+        """Per value: is it an angle of period 2π (see ParameterInput.periodic)?"""
+        return np.array([e.periodic for e in self.entries for _ in range(e.size)], dtype=bool)
 
     def entry(self, name: str) -> ParameterInput:
         for e in self.entries:
@@ -236,12 +243,13 @@ class _Builder:
         self.size = 0
         self._symbols: list[ca.SX] = []
 
-    def take(self, name: str, unit: str, components, default, lower, upper, lower_open: bool = False) -> ca.SX:
+    def take(self, name: str, unit: str, components, default, lower, upper, lower_open: bool = False,
+             periodic: bool = False) -> ca.SX:
         size = len(default)
         symbol = ca.SX.sym(c_identifier(name), size)
         self.entries.append(ParameterInput(name, c_identifier(name), self.size, size, unit, tuple(components),
                                            tuple(float(v) for v in default), tuple(float(v) for v in lower),
-                                           tuple(float(v) for v in upper), lower_open))
+                                           tuple(float(v) for v in upper), lower_open, periodic))
         self._symbols.append(symbol)
         self.size += size
         return symbol
@@ -267,7 +275,7 @@ def _task_parameters(b: _Builder, task: Task, fields: tuple[str, ...]) -> tuple[
             unit, components = next((u, c) for f, _, u, c in task.reference_fields() if f == key)
             r = REFERENCE_RANGE[key]
             values.reference[key] = b.take(f"{task.name}.{key}", unit, components, value, [-r] * len(value),
-                                           [r] * len(value))
+                                           [r] * len(value), periodic=key == "rpy")
     activation = None
     if "activation" in fields:
         activation = b.take(f"{task.name}.activation", "", ("a",), [1.0], [0.0], [1.0])

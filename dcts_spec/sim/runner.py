@@ -92,7 +92,7 @@ class Simulation:
         # both runtimes apply, for the log (parameter_ramp.py)
         changes = sorted(sc.parameter_changes, key=lambda c: c.time)
         layout = self.param_layout
-        ramp = ParameterRamp(layout.defaults, ramp_steps(layout.ramp_time, period))
+        ramp = ParameterRamp(layout.defaults, ramp_steps(layout.ramp_time, period), layout.periodic)
         if changes:
             self.runtime.set_params(layout.defaults)
         params = log.param
