@@ -238,6 +238,11 @@ class Controller:
         """The compiled values, by name."""
         return self.param_layout.as_dict(self.param_layout.defaults)
 
+    def reset(self) -> None:
+        """Forget the history (the last finite q, which the fallback torque holds), as the C
+        runtime's reset; the parameter set and its ramp are kept."""
+        self._last_q = None
+
     def reset_params(self) -> None:
         """Back to the compiled values at once (no ramp), as a freshly initialized controller."""
         layout = self.param_layout

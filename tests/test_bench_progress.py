@@ -25,7 +25,7 @@ def test_bench_announces_each_stage(monkeypatch: pytest.MonkeyPatch, tmp_path: P
     zeros = np.zeros(robot.nv)
     state = State(robot.neutral_configuration(), zeros, zeros, np.zeros(0))
     controller = SimpleNamespace(robot=robot, problem=SimpleNamespace(levels=[]), ref_size=0,
-                                 step=lambda *args: None)
+                                 step=lambda *args: None, reset=lambda: None)
     manifest = {"name": "minimal", "formulation": "dcts", "nq": robot.nv, "nref": 0, "nx": 0, "na": 0,
                 "nlevels": 2, "workspace_bytes_host": 0, "qp_data_instructions": 0,
                 "host": {"compiler": "cc", "build_dir": "build"}}

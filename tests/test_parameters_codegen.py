@@ -117,3 +117,17 @@ def test_c_ramps_an_orientation_reference_the_short_way_round_as_python_does(tmp
     assert compiled.params()["grip.rpy"] == python.params()["grip.rpy"] == [3.1, 0.0, 2 * np.pi - 3.1]
     np.testing.assert_allclose(taus[id(compiled)], taus[id(python)], rtol=1e-6, atol=1e-6)
     compiled.close()
+
+
+def test_reset_params_goes_back_to_the_compiled_values_at_once_in_both_runtimes(pair):
+    """The C runtime had no way back to the defaults at once (its reset keeps the set, and setting
+    the defaults ramps), and CompiledController no reset_params (found from outside)."""
+    _, c, python = pair
+    fresh = python.step(Q, DQ).tau
+    for runtime in (c, python):
+        runtime.set_params({"tool.kp": 300, "joint_torque.max": 80})
+        runtime.step(Q, DQ)
+        runtime.reset_params()
+        assert runtime.params() == runtime.params_default()
+        np.testing.assert_allclose(runtime.step(Q, DQ).tau, fresh, rtol=1e-6, atol=1e-6)
+        runtime.reset()  # (and the history: both runtimes have it)

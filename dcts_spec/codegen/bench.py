@@ -214,7 +214,7 @@ def python_runtime(controller, compiled, states: list[State]) -> dict:
     in Python costs."""
     runs = {"python": [], "ctypes": []}
     for _ in range(REPEATS):
-        controller._last_q = None
+        controller.reset()
         runs["python"].append(_step_times(controller.step, states, bool(controller.ref_size)))
         runs["ctypes"].append(_step_times(compiled.step, states, bool(controller.ref_size)))
     python, ctypes_step = (min(runs[key], key=np.median) for key in ("python", "ctypes"))

@@ -295,7 +295,7 @@ class Golden:
 def compute_golden(controller: Controller, states: list[State]) -> Golden:
     """Run the Python runtime over the states in order (a fresh controller state first), and
     measure how far each answer is determined by its data."""
-    controller._last_q = None
+    controller.reset()
     controller.reset_params()
     n, nx, levels = controller.n, controller.nx, len(controller.priorities)
     count = len(states)
@@ -315,7 +315,7 @@ def compute_golden(controller: Controller, states: list[State]) -> Golden:
         if r.status >= 0:
             limit[k] = SPREAD_FRACTION * tolerances[r.status == STATUS_LIMITS_RELAXED]
             spread[k] = controller.answer_spread(s.q, s.dq, s.tau_ext, ref, r.x, SPREAD_SAMPLES, limit[k])
-    controller._last_q = None
+    controller.reset()
     controller.reset_params()
     command, solution = (spread[:, i] <= limit for i in (0, 1))
     compared = np.where(command & solution, COMPARED_ALL, np.where(command, COMPARED_COMMAND, COMPARED_STATUS))

@@ -122,6 +122,8 @@ class CompiledController:
         self._set_params = self._lib_fn("set_params")
         self._set_params.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.POINTER(ctypes.c_int)]
         self._set_params.restype = ctypes.c_int
+        self._reset_params = self._lib_fn("reset_params")
+        self._reset_params.argtypes, self._reset_params.restype = [ctypes.c_void_p], ctypes.c_int
         self._get_params = self._lib_fn("get_params")
         self._get_params.argtypes, self._get_params.restype = [ctypes.c_void_p, ctypes.c_void_p], ctypes.c_int
         self._param_name = self._lib_fn("param_name")
@@ -163,6 +165,11 @@ class CompiledController:
 
     def params_default(self) -> dict[str, list[float]]:
         return self.param_layout.as_dict(self.param_layout.defaults)
+
+    def reset_params(self) -> None:
+        """As `Controller.reset_params`: back to the compiled values at once (no ramp)."""
+        if self._reset_params(self._ws) != 0:
+            raise RuntimeError("the controller was closed")
 
     def _params_target(self) -> np.ndarray:
         buffer = np.zeros(max(self.param_size, 1))
