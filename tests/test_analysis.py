@@ -142,6 +142,7 @@ def test_summary_definitions(case) -> None:
     assert summary["joint_acceleration_limits"] is bool(np.isfinite(robot.limits.a_max).any())
     assert summary["solver_failures"] == 1 and summary["limits_relaxed"] == 1
     assert summary["min_scaling"] == 0.0
+    assert summary["min_scaling_by_priority"] == {"1": 1.0, "2": 0.4, "3": 0.0}
     assert summary["realtime_factor"] == pytest.approx(0.08 / 0.04)
     errors = series.task_errors["reach"]
     assert summary["task_rms_error"]["reach"] == pytest.approx(np.sqrt(np.mean(np.sum(errors**2, axis=1))))

@@ -23,7 +23,9 @@ applied then, ramps included):
   its number of steps and the first and last time; for a joint also `beyond`, which of its limits
   (position, velocity) its state was beyond in those steps and by how much at most
 - min_scaling = min over samples and levels of the task scalings; min_scaling_at: the first sample
-  and the highest level where it occurs (priority, its tasks, time), None if no level ever scaled
+  and the highest level where it occurs (priority, its tasks, time), None if no level ever scaled;
+  min_scaling_by_priority[p] = min over samples of level p's scaling (min_scaling_at may name a
+  posture's early dip while priority 1 sat at 0 for hundreds of steps later on)
 - task_rms_error[t] = sqrt(mean_k ‖Δx_t,k‖²), task_mean_error[t] = mean_k ‖Δx_t,k‖ (SI units); for
   a pure damping task (no reference) Δx is the velocity error −ẋ: task_error_quantity says which
 - task_final_error[t] = max ‖Δx_t,k‖ over the last 10 % of the samples: a task still moving or
@@ -134,6 +136,8 @@ def summarize(log: SimulationLog, series: TimeSeries, robot: Robot, priorities: 
         "relaxed_bounds": _relaxed_bounds(log, series, robot, collision, position_excess, velocity_excess),
         "min_scaling": _peak(log.scaling, np.min, default=1.0),
         "min_scaling_at": _min_scaling_at(log, series, priorities),
+        "min_scaling_by_priority": {str(p): _peak(log.scaling[:, i], np.min, default=1.0)
+                                    for i, p in enumerate(priorities)},
         "task_error_quantity": {t: "damping (velocity error)" if t in series.damping else "tracking error"
                                 for t in series.task_errors},
         "task_rms_error": {t: _rms_norm(e) for t, e in series.task_errors.items()},

@@ -123,6 +123,7 @@ def run_units(task_units: dict[str, str], levels: dict[int, str], robot: Robot) 
         "collision_violations": {"min_distance": "m", "by": "m", "steps": "steps", "first": "s", "last": "s"},
         "max_collision_violation": "m",
         "min_scaling_at": {"time": "s"},
+        "min_scaling_by_priority": {str(p): "1" for p in levels},
         "primary_mean_acceleration_error": next(iter(level_accelerations.values()), "1"),
         "mean_acceleration_error": level_accelerations,
         **{key: dict(task_units) for key in ("task_rms_error", "task_mean_error", "task_final_error")},
