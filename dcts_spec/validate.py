@@ -14,7 +14,7 @@ from .formulations.hierarchy import OverConstrainedLevel, level_structure
 from .limits.naming import bound_text
 from .robot.model import Robot
 from .robot.resolve import frame_candidates, resolve_robot
-from .spec import Diagnostic, Spec, SpecError, load_spec
+from .spec import Diagnostic, Spec, SpecError, check_structure, load_spec
 from .spec.errors import did_you_mean
 from .spec.scenario import run_steps_problem
 from .spec.tasks import TaskSpec
@@ -135,7 +135,9 @@ def validate_file(path: str | Path) -> ValidationReport:
 
 
 def validate_spec(spec: Spec) -> ValidationReport:
-    """Check a structurally valid spec against its robot; raises SpecError on errors."""
+    """Check a spec (its structure again, if it was edited in Python) against its robot; raises
+    SpecError on errors."""
+    check_structure(spec)
     robot, diags = resolve_robot(spec)
     diags += _check_tasks(spec, robot)
     diags += _check_controller(spec, robot)

@@ -482,3 +482,45 @@ def test_a_run_with_more_steps_than_a_log_keeps_is_an_error(tmp_path: Path) -> N
     assert not (tmp_path / "out").exists()
     spec.write_text(text)  # the longest run at the default period
     assert dcts("validate", str(spec)).returncode == 0
+
+
+def _nan_torque_limit(spec):
+    limits = spec.limits
+    torque = limits.joint_torque.model_copy(update={"max": float("nan")})
+    return spec.model_copy(update={"limits": limits.model_copy(update={"joint_torque": torque})})
+
+
+def _negative_period(spec):
+    return spec.model_copy(update={"controller": spec.controller.model_copy(update={"period": -1.0})})
+
+
+@pytest.mark.parametrize(("edit", "path"), [(_nan_torque_limit, "limits.joint_torque.max"),
+                                            (_negative_period, "controller.period")])
+def test_a_spec_edited_in_python_is_checked_again(edit, path):
+    """model_copy(update=...) does not validate: a NaN torque limit built a controller whose every
+    torque was NaN (status -2), and a negative period built and stepped (found from outside)."""
+    from dcts_spec import build_controller, load_spec
+    from dcts_spec.spec.errors import format_path
+
+    with pytest.raises(SpecError) as caught:
+        build_controller(edit(load_spec(ROOT / "specs" / "minimal.yaml")))
+    (error,) = caught.value.errors
+    assert error.line is None and "as edited in Python" in error.file and format_path(error.path) == path
+
+
+def test_a_bundle_of_a_spec_edited_in_python_records_the_edited_spec(tmp_path):
+    """spec.yaml and SPEC_SHA256 of the bundle are the compiled spec's: a spec edited to a 40 Nm
+    torque limit recorded its file's 100 Nm and the file's digest (found from outside)."""
+    from dcts_spec import load_spec
+    from dcts_spec.codegen import compile_bundle
+
+    spec = load_spec(ROOT / "specs" / "minimal.yaml")
+    limits = spec.limits
+    torque = limits.joint_torque.model_copy(update={"max": 40.0})
+    edited = spec.model_copy(update={"limits": limits.model_copy(update={"joint_torque": torque})})
+    for which, out in ((spec, tmp_path / "as_file"), (edited, tmp_path / "edited")):
+        compile_bundle(which, out, build=False)
+    manifests = [json.loads((tmp_path / d / "manifest.json").read_text()) for d in ("as_file", "edited")]
+    assert manifests[0]["spec_sha256"] != manifests[1]["spec_sha256"]
+    assert b"The smallest useful spec" in (tmp_path / "as_file" / "spec.yaml").read_bytes()  # (the file, comments too)
+    assert load_spec(tmp_path / "edited" / "spec.yaml").limits.joint_torque.max == 40.0

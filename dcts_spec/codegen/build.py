@@ -28,6 +28,7 @@ from ..phases import building_controller, phase
 from ..controller import Controller
 from ..robot.model import Robot
 from ..spec import Spec, load_spec
+from ..spec.loader import recorded_bytes
 from .bundle import DAQP_VERSION, GENERATOR, GOLDEN_COUNT, CodegenError, generate_sources
 from .model import model_record
 from .process import build_timeout as checked_timeout, run, tail
@@ -200,8 +201,7 @@ class BuildReport:
 
 def _load(spec: Spec | str | Path) -> tuple[Spec, bytes | None]:
     if isinstance(spec, Spec):
-        file = Path(spec.source.file)
-        return spec, file.read_bytes() if file.is_file() else None
+        return spec, recorded_bytes(spec)
     path = Path(spec)
     return load_spec(path), path.read_bytes() if path.is_file() else None
 

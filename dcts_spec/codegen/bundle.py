@@ -29,6 +29,7 @@ from ..parameter_ramp import ramp_steps
 from ..solve import BOUND_TOLERANCE, DAQP_SETTINGS
 from ..solve import lexicographic
 from ..spec import Spec
+from ..spec.loader import recorded_bytes
 from .layout import (C_DATA_OUTPUTS, array_lengths, casadi_work_lengths, daqp_storage, header_fields, workspace_fields,
                      workspace_struct)
 from .datasheet import (conventions_text, fmt_list, gains_text, limits_text, model_texts, parameters_doc_text,
@@ -107,13 +108,10 @@ def c_array(values) -> str:
 
 
 def spec_digest(spec: Spec, spec_bytes: bytes | None = None) -> str:
-    """SHA-256 of the spec file's contents (of its normalized JSON when there is no file)."""
+    """SHA-256 of what the bundle records as its spec (`recorded_bytes`: the spec file's contents,
+    or the values of a spec edited in Python), of its normalized JSON when there is no file."""
     if spec_bytes is None:
-        file = Path(spec.source.file)
-        if file.is_file():
-            spec_bytes = file.read_bytes()
-        else:
-            spec_bytes = spec.model_dump_json().encode()
+        spec_bytes = recorded_bytes(spec) or spec.model_dump_json().encode()
     return hashlib.sha256(spec_bytes).hexdigest()
 
 

@@ -189,7 +189,7 @@ class BundleCache:
             "generator": GENERATOR,
             "dcts_version": version(),
             "dcts_sources": source_digest(),
-            "spec_sha256": spec_digest(spec, file.read_bytes() if has_file else None),
+            "spec_sha256": spec_digest(spec),
             "spec_json_sha256": hashlib.sha256(spec.model_dump_json().encode()).hexdigest(),
             "spec_file": str(file.resolve()) if has_file else str(spec.source.file or ""),
             "formulation": formulation,

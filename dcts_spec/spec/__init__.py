@@ -2,6 +2,6 @@
 
 from .document import Spec
 from .errors import Diagnostic, SpecError
-from .loader import load_spec, load_spec_text
+from .loader import check_structure, load_spec, load_spec_text
 
-__all__ = ["Diagnostic", "Spec", "SpecError", "load_spec", "load_spec_text"]
+__all__ = ["Diagnostic", "Spec", "SpecError", "check_structure", "load_spec", "load_spec_text"]

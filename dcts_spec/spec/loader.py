@@ -8,6 +8,7 @@ import typing
 from pathlib import Path
 from typing import Any
 
+import yaml
 from pydantic import BaseModel, ValidationError
 
 from .document import Spec
@@ -28,6 +29,44 @@ def load_spec_text(text: str, file: str = "<text>") -> Spec:
     """Like `load_spec`, from YAML text."""
     data, source = read_yaml(text, file)
     return spec_from_data(data, source)
+
+
+def check_structure(spec: Spec) -> None:
+    """Raise SpecError if `spec`'s values do not pass the checks `load_spec` makes: a Spec edited in
+    Python (frozen models change by `model_copy(update=...)`, which pydantic does not validate) had
+    a NaN torque limit built into a controller whose every torque was NaN. The errors name the
+    edited value's path, in no line of the file (which still holds the old value)."""
+    data = spec.model_dump(by_alias=True)
+    try:
+        Spec.model_validate(data)
+    except ValidationError as exc:
+        raise SpecError(_diagnostics(exc, data, SourceMap(f"{spec.source.file} (as edited in Python)"), Spec)) from None
+
+
+def spec_yaml(spec: Spec) -> str:
+    """The spec's values as YAML that loads back to the same spec (units as written, nothing
+    converted)."""
+    def plain(value: Any) -> Any:  # (tuples as lists: YAML's safe dumper knows no tuple)
+        if isinstance(value, dict):
+            return {k: plain(v) for k, v in value.items()}
+        return [plain(v) for v in value] if isinstance(value, (list, tuple)) else value
+
+    return yaml.safe_dump(plain(spec.model_dump(by_alias=True)), sort_keys=False, allow_unicode=True)
+
+
+def recorded_bytes(spec: Spec) -> bytes | None:
+    """What a bundle records as its spec (spec.yaml, SPEC_SHA256): the bytes of the file `spec` was
+    loaded from if that file still gives this spec, else its values as YAML (a spec edited in
+    Python: the bundle compiled at a 40 Nm limit recorded the file's 100 Nm, found from outside);
+    None for a spec that has no file (from text)."""
+    file = Path(spec.source.file)
+    if not file.is_file():
+        return None
+    try:
+        same = load_spec(file).model_dump() == spec.model_dump()
+    except SpecError:
+        same = False
+    return file.read_bytes() if same else spec_yaml(spec).encode("utf-8")
 
 
 def spec_from_data(data: dict[str, Any], source: SourceMap) -> Spec:
