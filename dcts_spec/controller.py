@@ -192,8 +192,13 @@ class Controller:
 
     @property
     def bound_names(self) -> list[str]:
-        """The joint and Cartesian bounds, in the order of the bound rows."""
-        return list(self.problem.acceleration_rows.names)
+        """The joint and Cartesian bounds, in the order of the bound rows (none for a closed form,
+        which has no bound rows: as the C runtime's)."""
+        return [] if self.law.qp is None else list(self.problem.acceleration_rows.names)
+
+    def __reduce__(self):
+        raise TypeError("a Controller holds CasADi expressions and cannot be copied or pickled: build another "
+                        "with build_controller(spec) (in another process: from the spec file)")
 
     @property
     def ref_layout(self) -> list[ReferenceInput]:

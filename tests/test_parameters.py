@@ -164,6 +164,7 @@ def test_a_new_set_during_a_ramp_starts_from_where_it_is():
     ({"joint_torque.max": 100.0000001}, "joint_torque.max", "100.0000001 Nm (joint1) is outside"),
     ({"tool.stiffness": 1}, "tool.stiffness", "no such run-time parameter"),
     ({"posture.kp": [1, 2]}, "posture.kp", "takes 7"),
+    ({"tool.kp": True}, "tool.kp", "True is not a number"),  # (it was taken as 1.0)
 ])
 def test_an_invalid_set_is_refused_and_the_old_one_kept(values, field, words):
     param = _controller("osc", ALL)

@@ -123,6 +123,7 @@ def test_reset_params_goes_back_to_the_compiled_values_at_once_in_both_runtimes(
     """The C runtime had no way back to the defaults at once (its reset keeps the set, and setting
     the defaults ramps), and CompiledController no reset_params (found from outside)."""
     _, c, python = pair
+    python.reset_params()  # (the module's other tests leave sets behind)
     fresh = python.step(Q, DQ).tau
     for runtime in (c, python):
         runtime.set_params({"tool.kp": 300, "joint_torque.max": 80})
@@ -131,3 +132,25 @@ def test_reset_params_goes_back_to_the_compiled_values_at_once_in_both_runtimes(
         assert runtime.params() == runtime.params_default()
         np.testing.assert_allclose(runtime.step(Q, DQ).tau, fresh, rtol=1e-6, atol=1e-6)
         runtime.reset()  # (and the history: both runtimes have it)
+
+
+def test_controllers_refuse_a_copy_with_a_clear_message(pair):
+    """A copy of a CompiledController shared its C workspace, and its release (at garbage
+    collection) left the original falling back with status -4 at every step (found from outside);
+    a Controller failed deep in CasADi. Both now say what to do instead, and the original runs on."""
+    import copy
+    import pickle
+
+    _, c, python = pair
+    for runtime, hint in ((c, "load the bundle again"), (python, "build another")):
+        for attempt in (copy.copy, copy.deepcopy, pickle.dumps):
+            with pytest.raises(TypeError, match=hint):
+                attempt(runtime)
+    assert c.step(Q, DQ).status >= 0
+
+
+def test_both_runtimes_name_the_same_bound_rows(pair):
+    """A closed form (osc) has no bound rows: the C runtime named none and the Python one all of
+    the problem's (found from outside)."""
+    _, c, python = pair
+    assert c.bound_names == python.bound_names and (python.formulation != "osc" or python.bound_names == [])

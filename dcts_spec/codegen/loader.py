@@ -275,6 +275,12 @@ class CompiledController:
         except Exception:  # pragma: no cover - interpreter shutdown
             pass
 
+    def __reduce__(self):
+        # A copy would share the C workspace, and its close() (at garbage collection) release the
+        # original's: every later step fell back with status -4, and no error said why
+        raise TypeError(f"a CompiledController owns its C workspace and cannot be copied or pickled: "
+                        f"load the bundle again for another one (load_bundle({str(self.directory)!r}))")
+
     def __enter__(self) -> "CompiledController":
         return self
 

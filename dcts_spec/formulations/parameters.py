@@ -140,6 +140,8 @@ class ParameterLayout:
         out = (self.defaults if base is None else np.asarray(base, dtype=float)).copy()
         for name, value in values.items():
             e = self.entry(name)
+            if any(isinstance(x, (bool, np.bool_)) for x in np.ravel(np.asarray(value, dtype=object))):
+                raise ParameterError(name, f"{value!r} is not a number (as in a spec, true/false are not 1/0)")
             v = np.asarray(value, dtype=float).reshape(-1)
             if v.size not in (1, e.size):
                 raise ParameterError(name, f"{v.size} values; it takes {e.size} ({', '.join(e.components)}) or one for all")

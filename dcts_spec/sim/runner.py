@@ -16,7 +16,7 @@ from ..formulations.parameters import ParameterLayout
 from ..parameter_ramp import ParameterRamp, ramp_steps
 from ..robot.collision import resolve_collision
 from ..robot.model import Robot
-from ..spec import Spec
+from ..spec import Spec, load_spec
 from ..tasks import make_task
 from ..validate import validate_spec
 from .disturbances import Disturbances
@@ -178,7 +178,7 @@ class Simulation:
         return log
 
 
-def prepare_simulation(spec: Spec, runtime: str = "python", formulation: str | None = None,
+def prepare_simulation(spec: Spec | str | Path, runtime: str = "python", formulation: str | None = None,
                        duration: float | None = None, work_dir: str | Path | None = None,
                        cache: bool | BundleCache = True) -> Simulation:
     """Validate the spec, resolve its scenario, build the runtime and the MuJoCo model.
@@ -187,8 +187,10 @@ def prepare_simulation(spec: Spec, runtime: str = "python", formulation: str | N
     `work_dir`); with model mismatch it is generated for the scaled model.
 
     Raises SpecError for a broken spec or a missing scenario, RuntimeUnavailable when the
-    runtime cannot be built here.
+    runtime cannot be built here. `spec`: a Spec or a spec file, as for `build_controller`.
     """
+    if not isinstance(spec, Spec):
+        spec = load_spec(spec)
     report = validate_spec(spec)
     scenario = resolve_scenario(spec, report.robot)
     if duration is not None:
