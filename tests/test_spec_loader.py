@@ -483,3 +483,15 @@ def test_a_spec_named_like_a_daqp_file_is_refused(name: str) -> None:
         load_spec_text(text.replace("name: minimal", f"name: {name}"))
     assert "is the name of one of DAQP's C files" in str(caught.value) and ":4:" in str(caught.value)
     load_spec_text(text.replace("name: minimal", "name: api_arm"))
+
+
+@pytest.mark.parametrize("name", ["math", "time", "String"])
+def test_a_spec_named_like_a_c_standard_header_is_refused(name: str) -> None:
+    """`name: math` validated, and its math.h then shadowed the system's where CMake put the
+    bundle's folder on the include path: the bundle's own CMake build did not compile (found from
+    outside)."""
+    text = (Path(__file__).resolve().parents[1] / "specs" / "minimal.yaml").read_text()
+    with pytest.raises(SpecError) as caught:
+        load_spec_text(text.replace("name: minimal", f"name: {name}"))
+    assert "is the name of a C standard header" in str(caught.value) and ":4:" in str(caught.value)
+    load_spec_text(text.replace("name: minimal", "name: math_arm"))

@@ -29,12 +29,21 @@ def _not_a_boolean(value: Any) -> Any:
 # not compile (`name: api`; first seen from outside). Case-insensitive file systems included.
 DAQP_FILE_NAMES = ("api", "auxiliary", "avi", "bnb", "constants", "daqp", "daqp_prox", "eq_elim", "factorization",
                    "hierarchical", "presolve", "types", "utils")
+# The C standard's headers: a build that puts the bundle's folder on the include path (CMake's
+# target_include_directories) found `name: math`'s math.h instead of the system's (isfinite
+# undeclared), and a program including <time.h> next to a `name: time` bundle did not compile.
+C_HEADER_NAMES = ("assert", "complex", "ctype", "errno", "fenv", "float", "inttypes", "iso646", "limits", "locale",
+                  "math", "setjmp", "signal", "stdalign", "stdarg", "stdatomic", "stdbool", "stddef", "stdint", "stdio",
+                  "stdlib", "stdnoreturn", "string", "tgmath", "threads", "time", "uchar", "wchar", "wctype")
 
 
 def _not_a_daqp_file(value: Any) -> Any:
     if isinstance(value, str) and value.lower() in DAQP_FILE_NAMES:
         raise ValueError(f"{value!r} is the name of one of DAQP's C files, which the bundle compiles next to its own; "
                          f"choose another (reserved: {', '.join(DAQP_FILE_NAMES)})")
+    if isinstance(value, str) and value.lower() in C_HEADER_NAMES:
+        raise ValueError(f"{value!r} is the name of a C standard header, which the bundle's {value}.h would shadow "
+                         f"where its folder is on the include path; choose another (reserved: {', '.join(C_HEADER_NAMES)})")
     return value
 
 
