@@ -784,7 +784,13 @@ def test_objects_follow_compiler_and_flags(built, tmp_path):
         return done.stdout
 
     assert _compiles(dry_run()) == []
-    for variables in ({"CC": "clang"}, {"CFLAGS": "-O1"}):
+    # another DAQP tree, older than the build: its objects were the bundle's own DAQP's (the dates
+    # decided), and a test built with the other DAQP ran the bundle's (found from outside)
+    other = tmp_path / "daqp_other"
+    shutil.copytree(copy / "daqp", other)
+    for path in other.rglob("*"):
+        os.utime(path, (0, 0))
+    for variables in ({"CC": "clang"}, {"CFLAGS": "-O1"}, {"DAQP_SRC": str(other)}):
         compiled = _compiles(dry_run(**variables))
         assert "three_levels.c" in compiled and len(compiled) == 4 + daqp, (variables, compiled)
     relinked = dry_run()  # build/config names another configuration now: relink, compile nothing
