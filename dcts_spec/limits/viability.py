@@ -160,9 +160,10 @@ def acceleration_bounds(
         lower = ca.fmax(ca.fmin(lower, accel_limit + give_up), -accel_limit)
         lower = ca.if_else(upper < -accel_limit, ca.fmin(lower, upper), lower)
         upper = ca.if_else(lower > accel_limit, ca.fmax(upper, lower), upper)
-    elif any(isinstance(limit, ca.SX) for limit in (x_min, x_max, v_max)):
-        # No acceleration limit, but limits the firmware may narrow: a state beyond a narrowed
-        # limit (within the envelope) is brought back braking at `braking`, as under an
+    elif envelope is not None and any(isinstance(limit, ca.SX) for limit in (x_min, x_max, v_max)):
+        # No acceleration limit, but joint limits the firmware may narrow (a Cartesian bound has no
+        # envelope here, and is as before): a state beyond a narrowed limit (within the envelope)
+        # is brought back braking at `braking`, as under an
         # acceleration limit, not in one period: a position limit lowered 0.05 rad below an
         # iiwa14's joint 6 asked -3142 rad/s² (back at the velocity limit within the step) and
         # the torque jumped 123 Nm when the ramp landed. Within its limits a state brakes as hard
