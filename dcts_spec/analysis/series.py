@@ -124,7 +124,8 @@ def evaluate(spec: Spec, robot: Robot, log: SimulationLog, problem: ControlProbl
     used = log.tau_ext_measured if spec.controller.external_torque == "measured" else np.zeros_like(log.tau)
     return TimeSeries(task_errors, acceleration_errors, positions, velocities, kinetic, task_kinetic,
                       kinetic - task_kinetic, acceleration_energy, payload_torque(robot, payloads, log), used,
-                      controller_acceleration(controller_robot or robot, log, used),
+                      controller_acceleration(log, used, M if controller_robot is None or controller_robot is robot
+                                              else _mass_matrices(controller_robot, log.q)),
                       tuple(damping), task_error_units(levels, robot), level_tasks, level_units(levels, robot),
                       limits_in_force(problem.param_layout, param, robot))
 
@@ -149,17 +150,24 @@ def payload_torque(robot: Robot, payloads: Sequence[Payload], log: SimulationLog
     return out
 
 
-def controller_acceleration(controller: Robot, log: SimulationLog, tau_ext_used: np.ndarray) -> np.ndarray:
-    """The joint acceleration the controller solved for at each step, with its model and its τ_ext
-    input: a = q̈_cmd + M_c(q)⁻¹ τ_ext,used, where q̈_cmd = M_c⁻¹(τ − ν_c − g_c) is the one the runtime
-    returns (docs/formulations.md). The joint acceleration limits bound a, not q̈_cmd."""
-    out = log.ddq_commanded.copy()
-    model = controller.model
+def controller_acceleration(log: SimulationLog, tau_ext_used: np.ndarray, M_c: np.ndarray) -> np.ndarray:
+    """The joint acceleration the controller solved for at each step, with its model (M_c, one
+    matrix a step) and its τ_ext input: a = q̈_cmd + M_c(q)⁻¹ τ_ext,used, where q̈_cmd =
+    M_c⁻¹(τ − ν_c − g_c) is the one the runtime returns (docs/formulations.md). The joint
+    acceleration limits bound a, not q̈_cmd."""
+    if not tau_ext_used.any():
+        return log.ddq_commanded.copy()
+    return log.ddq_commanded + np.linalg.solve(M_c, tau_ext_used[..., None])[..., 0]
+
+
+def _mass_matrices(robot: Robot, q: np.ndarray) -> np.ndarray:
+    """M(q_k) of `robot` at each step (the controller's model, where it differs from the simulated one)."""
+    model = robot.model
     data = model.createData()
-    for k in np.flatnonzero(np.any(tau_ext_used != 0.0, axis=1)):
-        M = pin.crba(model, data, log.q[k])
-        # (Pinocchio 3 may fill the upper triangle only: pin>=3.0 is what the package accepts)
-        out[k] += np.linalg.solve(np.triu(M) + np.triu(M, 1).T, tau_ext_used[k])
+    out = np.empty((len(q), model.nv, model.nv))
+    for k, q_k in enumerate(q):
+        M = pin.crba(model, data, q_k)
+        out[k] = np.triu(M) + np.triu(M, 1).T  # (crba fills the upper triangle)
     return out
 
 
