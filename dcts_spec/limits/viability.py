@@ -169,7 +169,7 @@ def acceleration_bounds(
         # the torque jumped 123 Nm when the ramp landed. Within its limits a state brakes as hard
         # as the limits ask (a joint pushed toward its limit still stops at it).
         beyond_high, beyond_low = ca.SX(0.0), ca.SX(0.0)
-        for high, low, value in ((x_max, x_min, x), (v_max, -v_max if _limited(v_max) else v_max, v)):
+        for high, low, value in ((x_max, x_min, x), (v_max, -v_max, v)):
             if _limited(high):
                 beyond_high = ca.logic_or(beyond_high, value > high)
             if _limited(low):
