@@ -5,7 +5,8 @@ needs nothing: dcts ships it, and the manifest keeps its model's SHA-256.
 
 The copy differs from the spec file only in that value and in an editor's schema line
 (`# yaml-language-server: $schema=../schemas/...`) whose relative path leads nowhere from the
-bundle: that line goes (a URL stays). `spec_sha256` stays the file's.
+bundle: that line goes (a URL stays). `spec_sha256` stays the file's. A spec edited in Python
+is copied as its values (`spec.loader.recorded_bytes`), and `spec_sha256` is theirs.
 """
 
 from __future__ import annotations

@@ -37,13 +37,13 @@ C_HEADER_NAMES = ("assert", "complex", "ctype", "errno", "fenv", "float", "intty
                   "stdlib", "stdnoreturn", "string", "tgmath", "threads", "time", "uchar", "wchar", "wctype")
 
 
-def _not_a_daqp_file(value: Any) -> Any:
-    if isinstance(value, str) and value.lower() in DAQP_FILE_NAMES:
-        raise ValueError(f"{value!r} is the name of one of DAQP's C files, which the bundle compiles next to its own; "
-                         f"choose another (reserved: {', '.join(DAQP_FILE_NAMES)})")
-    if isinstance(value, str) and value.lower() in C_HEADER_NAMES:
-        raise ValueError(f"{value!r} is the name of a C standard header, which the bundle's {value}.h would shadow "
-                         f"where its folder is on the include path; choose another (reserved: {', '.join(C_HEADER_NAMES)})")
+def _not_a_shadowing_name(value: Any) -> Any:
+    """A spec name that is not the stem of a C file its bundle's own files could be mistaken for."""
+    for names, what in ((DAQP_FILE_NAMES, "one of DAQP's C files, which the bundle compiles next to its own"),
+                        (C_HEADER_NAMES, f"a C standard header, which the bundle's {value}.h would shadow where its "
+                                         "folder is on the include path")):
+        if isinstance(value, str) and value.lower() in names:
+            raise ValueError(f"{value!r} is the name of {what}; choose another (reserved: {', '.join(names)})")
     return value
 
 
@@ -64,7 +64,7 @@ class Spec(StrictModel):
     }]})
 
     version: Annotated[Literal[1], BeforeValidator(_not_a_boolean)] = Field(description="spec language version; 1 is the only one", examples=[1])
-    name: Annotated[str, AfterValidator(_not_a_daqp_file)] = Field(
+    name: Annotated[str, AfterValidator(_not_a_shadowing_name)] = Field(
         pattern=r"^[A-Za-z_][A-Za-z0-9_]*$",
         max_length=64,
         description="identifier (letters, digits, _; at most 64 characters); prefixes the generated C symbols "
