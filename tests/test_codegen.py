@@ -1000,8 +1000,9 @@ def test_closed_loop_states_start_inside_the_cartesian_bounds(tmp_path):
 
 
 def test_casadi_helpers_become_macros_with_the_virtual_machines_numbers(tmp_path):
-    """patch_casadi_source turns CasADi's sq and fabs calls into macros: the compiled function gives
-    what CasADi's virtual machine (the Python runtime) gives, NaN, ±inf and ±0 included."""
+    """patch_casadi_source turns CasADi's sq and fabs calls into macros, and fmin and fmax where asked
+    (QP data compiled at -O2): the compiled function gives what CasADi's virtual machine (the Python
+    runtime) gives, NaN, ±inf and ±0 included."""
     import casadi as ca
 
     from dcts_spec.codegen.bundle import patch_casadi_source
@@ -1012,8 +1013,12 @@ def test_casadi_helpers_become_macros_with_the_virtual_machines_numbers(tmp_path
     generator = ca.CodeGenerator("helpers.c")
     generator.add(function)
     generator.generate(str(tmp_path) + "/")
-    source = patch_casadi_source((tmp_path / "helpers.c").read_text())
+    generated = (tmp_path / "helpers.c").read_text()
+    assert "DCTS_FMIN(" not in patch_casadi_source(generated)
+    source = patch_casadi_source(generated, min_max_macros=True)
     assert "casadi_sq(a" not in source and "DCTS_SQ(" in source and "DCTS_FABS(" in source
+    assert "casadi_fmin(a" not in source and "casadi_fmax(a" not in source
+    assert "DCTS_FMIN(" in source and "DCTS_FMAX(" in source
     (tmp_path / "helpers.c").write_text(source)
     values = [np.nan, np.inf, -np.inf, 0.0, -0.0, 1.5, -2.0]
     pairs = [(a, b) for a in values for b in values]

@@ -134,15 +134,22 @@ def qp_data_function(controller: Controller, name: str) -> ca.Function:
 
 _DEFINITION = re.compile(r"^(?:[A-Za-z_][\w]*\s+)*[\w\*\s]*?\b(\w+)\(([^()]*)\)\s*\{\s*$")
 _PARAMETER_NAME = re.compile(r"(\w+)\s*(?:\[\s*\w*\s*\])?\s*$")
-# CasADi's scalar helpers sq and fabs, called on a work variable (a12) in the generated functions,
-# as expressions: gcc leaves them out-of-line calls in a function of thousands of lines. (fmin and
-# fmax as macros too, with C99's NaN rule, cut the bench spec's QP-data instructions by 12.6 %
-# instead of 6.6 %, but their ~900 branches raised gcc's peak memory on TALOS's 28 joints from
-# 0.94 to 1.15 GB, above issue 16's 1 GB: they stay calls.)
+# CasADi's scalar helpers, called on work variables (a12) in the generated functions, as
+# expressions: gcc leaves them out-of-line calls in a function of thousands of lines (fmin and fmax
+# then call libm's). sq and fabs always (the bench spec's QP data: 6.6 % fewer instructions). fmin
+# and fmax with C99's NaN rule (and x86's choice between ±0, as glibc's fmax and fmin make it) only
+# in QP data compiled at -O2: there they cut the bench spec's one-solve step by 5 % of its
+# instructions, but in the large QP data compiled at -O1 their ~900 branches raised gcc's peak
+# memory on TALOS's 28 joints from 0.94 to 1.15 GB, above issue 16's 1 GB.
 _HELPER_CALL = re.compile(r"\bcasadi_(sq|fabs)\((a\d+)\)")
+_MIN_MAX_CALL = re.compile(r"\bcasadi_(fmin|fmax)\((a\d+),(a\d+)\)")
 _HELPER_MACROS = """/* dcts: CasADi's sq and fabs as expressions in the generated functions (patch_casadi_source) */
 #define DCTS_SQ(x) ((x)*(x))
 #define DCTS_FABS(x) fabs(x)
+"""
+_MIN_MAX_MACROS = """/* dcts: and fmin and fmax, as C99 has them for NaN (the other argument) */
+#define DCTS_FMIN(x, y) (((x) < (y) || (y) != (y)) ? (x) : (y))
+#define DCTS_FMAX(x, y) (((x) > (y) || (y) != (y)) ? (x) : (y))
 """
 
 
@@ -175,22 +182,26 @@ def unconditional_outputs(text: str) -> str:
     return "\n".join(out) + "\n"
 
 
-def patch_casadi_source(text: str) -> str:
+def patch_casadi_source(text: str, min_max_macros: bool = False) -> str:
     """Make CasADi's generated C build warning-free under -Wall -Wextra -pedantic, and check it.
 
     Generated functions take (arg, res, iw, w, mem) whether they use them or not: every function
     definition gets `(void)param;` for each of its parameters. The calls of CasADi's scalar
-    helpers sq and fabs become macros (`_HELPER_CALL`; QP data of the bench spec: 6.6 % fewer
-    instructions), and the output stores lose their null checks (`unconditional_outputs`).
-    The file is then checked: no heap calls and no mutable static data (only const sparsity
-    patterns may be static)."""
+    helpers sq and fabs become macros (`_HELPER_CALL`), and fmin and fmax too with
+    `min_max_macros` (`_MIN_MAX_CALL`); the output stores lose their null checks
+    (`unconditional_outputs`). The file is then checked: no heap calls and no mutable static data
+    (only const sparsity patterns may be static)."""
     lines = unconditional_outputs(text).splitlines()
     out: list[str] = []
     for line in lines:
         if line.startswith("#include <math.h>"):
             out.extend([line, _HELPER_MACROS.rstrip("\n")])
+            if min_max_macros:
+                out.append(_MIN_MAX_MACROS.rstrip("\n"))
             continue
         line = _HELPER_CALL.sub(lambda call: f"DCTS_{call.group(1).upper()}({call.group(2)})", line)
+        if min_max_macros:
+            line = _MIN_MAX_CALL.sub(lambda call: f"DCTS_{call.group(1).upper()}({call.group(2)}, {call.group(3)})", line)
         out.append(line)
         match = _DEFINITION.match(line)
         if match is None or line.lstrip().startswith(("if", "for", "while", "switch", "else", "#")):
@@ -232,7 +243,7 @@ def generate_casadi(controller: Controller, name: str, directory: Path) -> dict[
     generator.add(fallback)
     generator.generate(str(directory) + "/")
     source = directory / f"{name}_casadi.c"
-    source.write_text(patch_casadi_source(source.read_text()))
+    source.write_text(patch_casadi_source(source.read_text(), min_max_macros=operations < QP_DATA_O1_FROM))
     return {
         "sz_arg": max(data.sz_arg(), fallback.sz_arg()),
         "sz_res": max(data.sz_res(), fallback.sz_res()),
