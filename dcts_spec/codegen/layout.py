@@ -124,6 +124,7 @@ def workspace_fields(nq: int, nref: int, nx: int, na: int, nlevels: int, casadi_
         ("chol", "double", n["chol"], "its Cholesky factor"),
         ("lba", "double", n["na"], "the cascade: row bounds (widened when relaxed)"),
         ("row_size", "double", n["na"], "each row's largest |coefficient|"),
+        ("data_size", "double", 0, "the largest |entry| of H and f, at least 1"),
         ("uba", "double", n["na"], ""),
         ("nominal", "double", nxa, "every level met"),
         ("lbx_w", "double", nxa, "variable bounds with the levels fixed so far"),
