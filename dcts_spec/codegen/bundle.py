@@ -137,10 +137,12 @@ _PARAMETER_NAME = re.compile(r"(\w+)\s*(?:\[\s*\w*\s*\])?\s*$")
 # CasADi's scalar helpers, called on work variables (a12) in the generated functions, as
 # expressions: gcc leaves them out-of-line calls in a function of thousands of lines (fmin and fmax
 # then call libm's). sq and fabs always (the bench spec's QP data: 6.6 % fewer instructions). fmin
-# and fmax with C99's NaN rule (and x86's choice between ±0, as glibc's fmax and fmin make it) only
-# in QP data compiled at -O2: there they cut the bench spec's one-solve step by 5 % of its
-# instructions, but in the large QP data compiled at -O1 their ~900 branches raised gcc's peak
-# memory on TALOS's 28 joints from 0.94 to 1.15 GB, above issue 16's 1 GB.
+# and fmax with C99's NaN rule (and x86's choice between ±0, as glibc's fmax and fmin make it) in
+# QP data compiled at -O2 or -O1: each call spilled the registers of the straight-line function,
+# and the QP data's median time fell by 17 % on the bench spec (2.15 -> 1.79 µs) and by 13 % on
+# TALOS's 28 joints (26 -> 22.7 µs; gcc at -O1 9.3 s and 0.62 GB, against 9.2 s and 0.58 GB with
+# the calls). Not at -O0 (QP_DATA_O0_FROM), where gcc's memory is already the limit; an earlier
+# try at -O2 took TALOS's 28 joints from 0.94 to 1.15 GB.
 _HELPER_CALL = re.compile(r"\bcasadi_(sq|fabs)\((a\d+)\)")
 _MIN_MAX_CALL = re.compile(r"\bcasadi_(fmin|fmax)\((a\d+),(a\d+)\)")
 _HELPER_MACROS = """/* dcts: CasADi's sq and fabs as expressions in the generated functions (patch_casadi_source) */
@@ -243,7 +245,7 @@ def generate_casadi(controller: Controller, name: str, directory: Path) -> dict[
     generator.add(fallback)
     generator.generate(str(directory) + "/")
     source = directory / f"{name}_casadi.c"
-    source.write_text(patch_casadi_source(source.read_text(), min_max_macros=operations < QP_DATA_O1_FROM))
+    source.write_text(patch_casadi_source(source.read_text(), min_max_macros=operations < QP_DATA_O0_FROM))
     return {
         "sz_arg": max(data.sz_arg(), fallback.sz_arg()),
         "sz_res": max(data.sz_res(), fallback.sz_res()),
