@@ -319,6 +319,29 @@ def test_nonfinite_inputs_give_the_fallback(built, three_levels_spec, where):
     np.testing.assert_allclose(result.tau, expected.tau, rtol=1e-12, atol=1e-12)
 
 
+def test_an_ignored_tau_ext_is_not_read(tmp_path):
+    """With `external_torque: ignored` neither runtime reads tau_ext: a NaN there (a broken sensor the
+    spec says not to use) gives the torque of tau_ext = 0 and status 0, not the fallback (it gave
+    status -1 at every step); the header says so. A measured one still falls back on a NaN."""
+    spec = tmp_path / "ignored.yaml"
+    spec.write_text(MINIMAL.read_text().replace("name: minimal", "name: ignored").replace(
+        "tasks:\n", "controller: {external_torque: ignored}\ntasks:\n", 1))
+    compiled = compile_c(spec, tmp_path / "bundle")
+    controller = build_controller(spec)
+    broken = np.full(7, np.nan)
+    for seed in range(5):
+        s = StateSampler(controller, seed=seed).random()
+        for runtime in (controller, compiled):
+            zero = runtime.step(s.q, s.dq, None)
+            nan = runtime.step(s.q, s.dq, broken)
+            assert zero.status == nan.status == 0
+            np.testing.assert_array_equal(nan.tau, zero.tau)
+    assert "(not tau_ext: this controller does not read it)" in (tmp_path / "bundle" / "ignored.h").read_text()
+    measured = build_controller(MINIMAL)
+    assert measured.step(s.q, s.dq, broken).status == STATUS_NONFINITE_INPUT
+    compiled.close()
+
+
 def test_a_copied_workspace_steps_as_not_initialized(built, three_levels_spec):
     """The workspace holds pointers into itself: a memcpy of an initialized one stepped on the
     original's memory (use after free once that was gone). It now reports -4 and the fallback."""

@@ -551,7 +551,8 @@ def generate_sources(
         daqp_note = " (closed-form law: no QP solver)"
     values = {
         "PARAMETERS": parameters_text(controller, big),
-        "STATUS_LIST": status_text(name, big, bool(controller.ref_size), nr, not controller.law.enforces_torque_limits),
+        "STATUS_LIST": status_text(name, big, bool(controller.ref_size), nr, not controller.law.enforces_torque_limits,
+                                   controller.spec.controller.external_torque == "measured"),
         "DDQ_NOTE": "" if controller.law.enforces_torque_limits else " before the torque clip",
         "CONVENTIONS": conventions_text(controller),
         "GAINS": gains_text(controller),
@@ -621,6 +622,7 @@ def generate_sources(
         **{f"SZ_{key.upper()}": value for key, value in work_length.items()},
         "SOLVER_BYTES": solver_bytes,
         "ENFORCES_TORQUE_LIMITS": int(bool(controller.law.enforces_torque_limits)),
+        "MEASURED_TAU_EXT": int(controller.spec.controller.external_torque == "measured"),
         "TORQUE_TOLERANCE": c_double(TORQUE_TOLERANCE),
         "DAQP_SETTINGS": daqp_settings_code(settings),
         "TAU_MAX_ARRAY": c_array(tau_max),

@@ -352,9 +352,10 @@ def parameters_struct(controller: Controller, big: str) -> tuple[str, str]:
 # -- statuses, model, timing -----------------------------------------------------------------------
 
 
-def status_text(name: str, big: str, takes_ref: bool, bound_rows: int, clips: bool) -> str:
+def status_text(name: str, big: str, takes_ref: bool, bound_rows: int, clips: bool, measured: bool) -> str:
     """The status table; `bound_rows`: the law's joint/Cartesian bound rows (none in a closed form),
-    `clips`: its torque is clipped to the limits rather than bounded (osc, projector)."""
+    `clips`: its torque is clipped to the limits rather than bounded (osc, projector), `measured`:
+    it reads tau_ext (controller.external_torque)."""
     if bound_rows:
         rows = [
             ("0", "OK", "every torque limit and joint/Cartesian bound holds (checked after the solve)"),
@@ -374,6 +375,7 @@ def status_text(name: str, big: str, takes_ref: bool, bound_rows: int, clips: bo
     rows += [
         ("-1", "NONFINITE_INPUT", "an input was NaN or infinite" + (" (or ref NULL: the controller takes one)"
                                                                       if takes_ref else "")),
+        *([("", "", "(not tau_ext: this controller does not read it)")] if not measured else []),
         ("-2", "SOLVER_FAILED", "the QP solver failed (also on non-finite QP data)"),
         ("-3", "INVALID_OUTPUT", "the solution was not finite or broke a torque limit"),
         ("-4", "NOT_INITIALIZED", f"{name}_init was not called or failed"),
