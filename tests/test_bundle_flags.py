@@ -34,6 +34,11 @@ def test_makefile_and_cmake_ship_the_flags(sources: Path) -> None:
     cmake = (sources / "CMakeLists.txt").read_text()
     assert shlex.split(re.search(r'set\(CMAKE_C_FLAGS_RELEASE (".*")\)', cmake).group(1)) == [" ".join(HOST_OPTIMIZATION)]
     assert "-march=native" not in HOST_OPTIMIZATION and "-ffast-math" not in HOST_OPTIMIZATION
+    # the same warnings, -Werror (CMake sets the standard itself); every bundle built in the tests
+    # compiles under them, -Wmissing-prototypes and -Wdouble-promotion included
+    warnings = re.search(r"^set\(WARNINGS (.*?)\)", cmake, re.M).group(1).split()
+    assert warnings == [flag for flag in C_WARNINGS if not flag.startswith("-std=")]
+    assert {"-Werror", "-Wmissing-prototypes", "-Wdouble-promotion"} <= set(warnings)
     # DAQP as its Python package builds it, by both (CMake built it with the Release flags alone)
     assert re.search(r"^DAQP_FLAGS = (.*)$", makefile, re.M).group(1).split() == list(DAQP_OPTIMIZATION)
     assert f'"$<$<CONFIG:Release>:{";".join(DAQP_OPTIMIZATION)}>"' in cmake

@@ -96,10 +96,10 @@ def render(text: str, values: dict[str, str]) -> str:
 def c_double(value: float) -> str:
     """An exact C99 literal of a double (hexadecimal floating constant)."""
     value = float(value)
-    if np.isnan(value):
-        return "NAN"
+    if np.isnan(value):  # (NAN and INFINITY are floats: -Wdouble-promotion)
+        return "(double)NAN"
     if np.isinf(value):
-        return "INFINITY" if value > 0 else "-INFINITY"
+        return "HUGE_VAL" if value > 0 else "-HUGE_VAL"
     return value.hex()
 
 
@@ -145,9 +145,11 @@ _PARAMETER_NAME = re.compile(r"(\w+)\s*(?:\[\s*\w*\s*\])?\s*$")
 # try at -O2 took TALOS's 28 joints from 0.94 to 1.15 GB.
 _HELPER_CALL = re.compile(r"\bcasadi_(sq|fabs)\((a\d+)\)")
 _MIN_MAX_CALL = re.compile(r"\bcasadi_(fmin|fmax)\((a\d+),(a\d+)\)")
+_HELPER_DEFINITION = re.compile(r"^(casadi_real casadi_(?:sq|fabs|fmin|fmax)\([^()]*\))")
 _HELPER_MACROS = """/* dcts: CasADi's sq and fabs as expressions in the generated functions (patch_casadi_source) */
 #define DCTS_SQ(x) ((x)*(x))
 #define DCTS_FABS(x) fabs(x)
+#define casadi_inf HUGE_VAL /* (CasADi's is INFINITY, a float: -Wdouble-promotion) */
 """
 _MIN_MAX_MACROS = """/* dcts: and fmin and fmax, as C99 has them for NaN (the other argument) */
 #define DCTS_FMIN(x, y) (((x) < (y) || (y) != (y)) ? (x) : (y))
@@ -184,23 +186,29 @@ def unconditional_outputs(text: str) -> str:
     return "\n".join(out) + "\n"
 
 
-def patch_casadi_source(text: str, min_max_macros: bool = False) -> str:
-    """Make CasADi's generated C build warning-free under -Wall -Wextra -pedantic, and check it.
+def patch_casadi_source(text: str, min_max_macros: bool = False, header: str | None = None) -> str:
+    """Make CasADi's generated C build warning-free under C_WARNINGS (-Wmissing-prototypes and
+    -Wdouble-promotion included, as firmware projects build), and check it.
 
     Generated functions take (arg, res, iw, w, mem) whether they use them or not: every function
-    definition gets `(void)param;` for each of its parameters. The calls of CasADi's scalar
-    helpers sq and fabs become macros (`_HELPER_CALL`), and fmin and fmax too with
-    `min_max_macros` (`_MIN_MAX_CALL`); the output stores lose their null checks
-    (`unconditional_outputs`). The file is then checked: no heap calls and no mutable static data
-    (only const sparsity patterns may be static)."""
+    definition gets `(void)param;` for each of its parameters. The file includes its own `header`
+    (the prototypes of what it exports), and CasADi's scalar helpers get a prototype each (static,
+    clang would call those the macros below leave unused). The calls of sq and fabs
+    become macros (`_HELPER_CALL`), and fmin and fmax too with `min_max_macros`
+    (`_MIN_MAX_CALL`); the output stores lose their null checks (`unconditional_outputs`). The
+    file is then checked: no heap calls and no mutable static data (only const sparsity patterns
+    may be static)."""
     lines = unconditional_outputs(text).splitlines()
     out: list[str] = []
     for line in lines:
         if line.startswith("#include <math.h>"):
-            out.extend([line, _HELPER_MACROS.rstrip("\n")])
+            out.extend([line, *([f'#include "{header}"'] if header else []), _HELPER_MACROS.rstrip("\n")])
             if min_max_macros:
                 out.append(_MIN_MAX_MACROS.rstrip("\n"))
             continue
+        helper = _HELPER_DEFINITION.match(line)
+        if helper:
+            out.append(f"{helper.group(1)};")
         line = _HELPER_CALL.sub(lambda call: f"DCTS_{call.group(1).upper()}({call.group(2)})", line)
         if min_max_macros:
             line = _MIN_MAX_CALL.sub(lambda call: f"DCTS_{call.group(1).upper()}({call.group(2)}, {call.group(3)})", line)
@@ -245,7 +253,8 @@ def generate_casadi(controller: Controller, name: str, directory: Path) -> dict[
     generator.add(fallback)
     generator.generate(str(directory) + "/")
     source = directory / f"{name}_casadi.c"
-    source.write_text(patch_casadi_source(source.read_text(), min_max_macros=operations < QP_DATA_O0_FROM))
+    source.write_text(patch_casadi_source(source.read_text(), min_max_macros=operations < QP_DATA_O0_FROM,
+                                          header=f"{name}_casadi.h"))
     return {
         "sz_arg": max(data.sz_arg(), fallback.sz_arg()),
         "sz_res": max(data.sz_res(), fallback.sz_res()),
@@ -638,6 +647,7 @@ def generate_sources(
         "QP_DATA_O1_FROM": QP_DATA_O1_FROM,
         "QP_DATA_O0_FROM": QP_DATA_O0_FROM,
         "C_WARNINGS": flags_text(C_WARNINGS),
+        "C_WARNINGS_CMAKE": flags_text(tuple(flag for flag in C_WARNINGS if not flag.startswith("-std="))),
         **_golden_tolerances(controller.formulation),
     }
     files = {
