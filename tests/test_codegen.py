@@ -922,9 +922,12 @@ def test_two_bundles_in_one_cmake_project(built, tmp_path):
         "set(CMAKE_SYSTEM_NAME Generic)\nset(CMAKE_SYSTEM_PROCESSOR arm)\nset(CMAKE_C_COMPILER arm-none-eabi-gcc)\n"
         "set(CMAKE_TRY_COMPILE_TARGET_TYPE STATIC_LIBRARY)\n"
         'set(CMAKE_C_FLAGS_INIT "-mcpu=cortex-m7 -mfpu=fpv5-d16 -mfloat-abi=hard")\n')
-    run("cmake", "-S", ".", "-B", "arm", "-DCMAKE_TOOLCHAIN_FILE=arm.cmake")
+    run("cmake", "-S", ".", "-B", "arm", "-DCMAKE_TOOLCHAIN_FILE=arm.cmake", "-DCMAKE_EXPORT_COMPILE_COMMANDS=ON")
     run("cmake", "--build", "arm", "-j2")
     assert (cell / "arm" / "cell").is_file()
+    # position-independent code only where there are shared libraries: not on bare metal
+    assert all("-fPIC" not in e["command"] for e in json.loads((cell / "arm" / "compile_commands.json").read_text()))
+    assert any("-fPIC" in e["command"] for e in json.loads((cell / "host" / "compile_commands.json").read_text()))
 
 
 @pytest.mark.skipif(shutil.which("clang") is None, reason="clang not installed")
