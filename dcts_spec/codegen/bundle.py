@@ -192,9 +192,9 @@ def patch_casadi_source(text: str, min_max_macros: bool = False, header: str | N
 
     Generated functions take (arg, res, iw, w, mem) whether they use them or not: every function
     definition gets `(void)param;` for each of its parameters. The file includes its own `header`
-    (the prototypes of what it exports), and CasADi's scalar helpers get a prototype each (static,
-    clang would call those the macros below leave unused). The calls of sq and fabs
-    become macros (`_HELPER_CALL`), and fmin and fmax too with `min_max_macros`
+    (the prototypes of what it exports), and CasADi's scalar helpers get a prototype each (made
+    static instead, the ones the macros below leave unused would be an error under clang). The
+    calls of sq and fabs become macros (`_HELPER_CALL`), and fmin and fmax too with `min_max_macros`
     (`_MIN_MAX_CALL`); the output stores lose their null checks (`unconditional_outputs`). The
     file is then checked: no heap calls and no mutable static data (only const sparsity patterns
     may be static)."""
@@ -519,6 +519,7 @@ def generate_sources(
     nref, levels = controller.ref_size, len(controller.priorities)
     qp = controller.law.qp
     nr = len(controller.bound_names) if qp is not None else 0
+    measured_tau_ext = spec.controller.external_torque == "measured"  # (else the step does not read tau_ext)
     npls = 0 if controller.law.least_squares_task is None else int(controller.law.least_squares_task[0].shape[0])
     priorities = qp.priorities if qp is not None else []
     bends = [p.bend for p in priorities]
@@ -561,7 +562,7 @@ def generate_sources(
     values = {
         "PARAMETERS": parameters_text(controller, big),
         "STATUS_LIST": status_text(name, big, bool(controller.ref_size), nr, not controller.law.enforces_torque_limits,
-                                   controller.spec.controller.external_torque == "measured"),
+                                   measured_tau_ext),
         "DDQ_NOTE": "" if controller.law.enforces_torque_limits else " before the torque clip",
         "CONVENTIONS": conventions_text(controller),
         "GAINS": gains_text(controller),
@@ -631,7 +632,7 @@ def generate_sources(
         **{f"SZ_{key.upper()}": value for key, value in work_length.items()},
         "SOLVER_BYTES": solver_bytes,
         "ENFORCES_TORQUE_LIMITS": int(bool(controller.law.enforces_torque_limits)),
-        "MEASURED_TAU_EXT": int(controller.spec.controller.external_torque == "measured"),
+        "MEASURED_TAU_EXT": int(measured_tau_ext),
         "TORQUE_TOLERANCE": c_double(TORQUE_TOLERANCE),
         "DAQP_SETTINGS": daqp_settings_code(settings),
         "TAU_MAX_ARRAY": c_array(tau_max),
