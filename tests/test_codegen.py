@@ -1082,6 +1082,8 @@ def test_bench_runs(tmp_path):
     text = format_report(result)
     assert result["c_step"]["trajectory"]["step"]["median_us"] > 0
     assert "Pinocchio" in text and "qp_data" in text
+    step = result["c_step"]["trajectory"]["step"]
+    assert f"its p99 / its median: {step['p99_us'] / step['median_us']:.1f} (target 2)" in text
 
 
 def test_closed_loop_states_start_inside_the_cartesian_bounds(tmp_path):

@@ -349,7 +349,8 @@ def format_report(r: dict) -> str:
     lines += [
         f"  Pinocchio: {r['pinocchio_terms']['how']}; frames {', '.join(r['pinocchio_terms']['frames']) or '-'}",
         "",
-        f"ratio C step (closed loop, default) / Pinocchio terms, medians: {r['ratio_c_step_to_pinocchio']:.2f}",
+        f"ratio C step (closed loop, default) / Pinocchio terms, medians: {r['ratio_c_step_to_pinocchio']:.2f} "
+        f"(target 1.3); its p99 / its median: {c['step']['p99_us'] / c['step']['median_us']:.1f} (target 2)",
         f"ratio Python runtime step / C step through ctypes, medians: {py['ratio_to_ctypes']:.1f}",
         f"the {'QP data' if data_share > 0.5 else 'QP solve'} dominates: qp_data is {100 * data_share:.0f}% of the median step",
         f"QP: {c['qp_iterations']['mean']:.1f} DAQP iterations on average, max {c['qp_iterations']['max']}, "
