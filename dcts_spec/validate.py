@@ -141,6 +141,7 @@ def validate_spec(spec: Spec) -> ValidationReport:
     robot, diags = resolve_robot(spec)
     diags += _check_tasks(spec, robot)
     diags += _check_controller(spec, robot)
+    diags += _gains_at_the_period(spec)
     diags += _check_scenario(spec, robot)
     diags += check_parameters(spec, robot)
     if any(d.severity == "error" for d in diags):
@@ -302,6 +303,38 @@ def _targets_beyond_range(spec: Spec, robot: Robot, task: TaskSpec, at: tuple) -
             at + ("reference", "q", i),
             f"{value / scale:.6g} {unit} is outside {name}'s range [{lo / scale:.6g}, {hi / scale:.6g}] {unit}: the "
             f"joint stops at its limit and this priority level gives way there", "warning"))
+    return diags
+
+
+def _gains_at_the_period(spec: Spec) -> list[Diagnostic]:
+    """A warning where a task's PD is unstable at the control period. Each level gets its commanded
+    acceleration exactly, so each axis is a double integrator held over the period T:
+    ẍ = kp Δx − kd ẋ is stable in discrete time only for kp T / 2 < kd < 2 / T (Jury's test on
+    x, ẋ over one period). kd T ≥ 2 turns the damping over at every step (the velocity times
+    1 − kd T): a stiff, critically damped task at 250 Hz (kp 1e5, kd 632) swung its torques between
+    the limits at every period. kd ≤ kp T / 2 (kd > 0) lets the oscillation grow."""
+    period, diags = spec.controller.period, []
+    for i, task in enumerate(spec.tasks):
+        kp, kd = (np.atleast_1d(np.asarray(v, dtype=float)) for v in (task.gains.kp, task.gains.kd))
+        if kp.size != kd.size and 1 not in (kp.size, kd.size):
+            continue  # (gains of different sizes: an error of their own)
+        kp, kd = np.broadcast_arrays(kp, kd)
+        over = kd * period >= 2.0
+        under = (kd > 0) & (kd <= kp * period / 2)
+        if over.any():
+            k = int(np.argmax(kd))
+            diags.append(spec.source.diagnostic(
+                ("tasks", i, "gains", "kd"),
+                f"kd × controller.period = {kd[k]:g} × {period:g} s = {kd[k] * period:.3g} ≥ 2: at this period the "
+                f"damping is unstable (each step multiplies the task's velocity by 1 − kd T = {1 - kd[k] * period:.3g}), "
+                f"and the torque swings between its limits; use kd < {2 / period:g} 1/s or a shorter period", "warning"))
+        elif under.any():
+            k = int(np.flatnonzero(under)[0])
+            diags.append(spec.source.diagnostic(
+                ("tasks", i, "gains", "kd"),
+                f"kd = {kd[k]:g} 1/s is at most kp × controller.period / 2 = {kp[k] * period / 2:.3g}: at this period "
+                f"the task's oscillation grows; raise kd (critical damping: 2√kp = {2 * np.sqrt(kp[k]):.3g}) or "
+                f"shorten the period", "warning"))
     return diags
 
 

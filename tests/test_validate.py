@@ -146,6 +146,31 @@ def test_a_lowest_priority_left_no_freedom_is_a_warning(tmp_path: Path) -> None:
     assert not any("gets no freedom" in m for _, m in _warnings(spec))
 
 
+@pytest.mark.parametrize(("period", "kp", "kd", "expected"), [
+    (0.004, 100000, 632, "kd × controller.period = 632 × 0.004 s = 2.53 ≥ 2"),  # critically damped, too fast for 250 Hz
+    (0.001, 100, 2100, "= 2.1 ≥ 2"),
+    (0.004, 100000, 100, "kd = 100 1/s is at most kp × controller.period / 2 = 200"),
+    (0.004, [100, 100000, 100], [20, 100, 20], "kd = 100 1/s is at most"),  # one axis
+    (0.001, 100000, 632, None),  # the same gains at 1 kHz: stable
+    (0.004, 10000, 200, None),
+    (0.001, 100, 0, None),  # no damping asked for: not this warning
+])
+def test_gains_unstable_at_the_period_are_a_warning(tmp_path: Path, period, kp, kd, expected) -> None:
+    """Each level gets its commanded acceleration exactly, so a task axis is a double integrator held
+    over the period: its PD is stable only for kp T/2 < kd < 2/T. Outside, validate warns at the
+    task's kd (a critically damped kp 1e5 at 250 Hz validated, then swung its torques between the
+    limits at every period in simulation; found from outside)."""
+    spec = tmp_path / "gains.yaml"
+    spec.write_text(f"version: 1\nname: gains\nrobot: {{model: iiwa14}}\ncontroller: {{period: {period}}}\ntasks:\n"
+                    f"  - {{name: reach, type: position, frame: tool, priority: 1, gains: {{kp: {kp}, kd: {kd}}},\n"
+                    f"     reference: {{position: [0.5, 0.0, 0.6]}}}}\n", encoding="utf-8")
+    found = [(line, m) for line, m in _warnings(spec) if "controller.period" in m]
+    if expected is None:
+        assert not found
+    else:
+        assert len(found) == 1 and found[0][0] == 6 and expected in found[0][1], found
+
+
 def test_warnings_through_the_cli(warning_specs: tuple[Path, Path]) -> None:
     widened, singular = warning_specs
     result = dcts("validate", str(widened), str(singular))

@@ -42,6 +42,11 @@ class Gains(StrictModel):
     def _saturation_needs_stiffness(self) -> "Gains":
         if self.max_velocity is not None and not self.has_stiffness():
             raise FieldError("max_velocity", "max_velocity needs kp > 0 (it saturates the velocity (kp/kd)Δx)")
+        kd = self.kd if isinstance(self.kd, tuple) else (self.kd,)
+        if self.max_velocity is not None and any(v == 0 for v in kd):
+            # (the saturated law ẍ_d = kd (v ẋ_d − ẋ) asks for nothing where kd = 0: the task was inert)
+            raise FieldError("kd", "max_velocity needs kd > 0 on every axis: the velocity-saturated law is "
+                             "ẍ_d = kd (v (kp/kd)Δx − ẋ), so with kd = 0 the task asks for no acceleration at all")
         return self
 
     def has_stiffness(self) -> bool:
