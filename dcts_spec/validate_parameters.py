@@ -17,6 +17,11 @@ def check_parameters(spec: Spec, robot: Robot) -> list[Diagnostic]:
     settings, src, diags = spec.parameters, spec.source, []
     if settings is None:
         return _check_schedule(spec, robot)
+    period = spec.controller.period
+    if settings.ramp_time is not None and 0 < settings.ramp_time < period:
+        diags.append(src.diagnostic(("parameters", "ramp_time"), f"{settings.ramp_time:g} s is shorter than one control "
+                                    f"period ({period:g} s): a new set is taken at once, with no ramp (a gain or limit "
+                                    f"change steps the torque); use at least a few periods", "warning"))
     tasks = {t.name: t for t in spec.tasks}
     for name, fields in settings.tasks.items():
         at = ("parameters", "tasks", name)
