@@ -137,8 +137,9 @@ _PARAMETER_NAME = re.compile(r"(\w+)\s*(?:\[\s*\w*\s*\])?\s*$")
 # CasADi's scalar helpers, called on work variables (a12) in the generated functions, as
 # expressions: gcc leaves them out-of-line calls in a function of thousands of lines (fmin and fmax
 # then call libm's). sq and fabs always (the bench spec's QP data: 6.6 % fewer instructions). fmin
-# and fmax with C99's NaN rule (and x86's choice between ±0, as glibc's fmax and fmin make it) in
-# QP data compiled at -O2 or -O1: each call spilled the registers of the straight-line function,
+# and fmax with C99's NaN rule, and x on a tie as CasADi's virtual machine (the Python runtime) takes
+# it between +0 and -0 (glibc's fmin and fmax, which gcc's calls reached, take y), in QP data
+# compiled at -O2 or -O1: each call spilled the registers of the straight-line function,
 # and the QP data's median time fell by 17 % on the bench spec (2.15 -> 1.79 µs) and by 13 % on
 # TALOS's 28 joints (26 -> 22.7 µs; gcc at -O1 9.3 s and 0.62 GB, against 9.2 s and 0.58 GB with
 # the calls). Not at -O0 (QP_DATA_O0_FROM), where gcc's memory is already the limit; an earlier
@@ -151,9 +152,9 @@ _HELPER_MACROS = """/* dcts: CasADi's sq and fabs as expressions in the generate
 #define DCTS_FABS(x) fabs(x)
 #define casadi_inf HUGE_VAL /* (CasADi's is INFINITY, a float: -Wdouble-promotion) */
 """
-_MIN_MAX_MACROS = """/* dcts: and fmin and fmax, as C99 has them for NaN (the other argument) */
-#define DCTS_FMIN(x, y) (((x) < (y) || (y) != (y)) ? (x) : (y))
-#define DCTS_FMAX(x, y) (((x) > (y) || (y) != (y)) ? (x) : (y))
+_MIN_MAX_MACROS = """/* dcts: and fmin and fmax, as C99 has them for NaN (the other argument), x on a tie (+0 and -0: CasADi's) */
+#define DCTS_FMIN(x, y) (((y) < (x) || (x) != (x)) ? (y) : (x))
+#define DCTS_FMAX(x, y) (((y) > (x) || (x) != (x)) ? (y) : (x))
 """
 
 
@@ -523,6 +524,7 @@ def generate_sources(
     npls = 0 if controller.law.least_squares_task is None else int(controller.law.least_squares_task[0].shape[0])
     priorities = qp.priorities if qp is not None else []
     bends = [p.bend for p in priorities]
+    bend_starts = [b[0] for b in bends] + ([bends[-1][-1] + 1] if bends else [0])  # level k's: [k] .. [k + 1] - 1
     if any(list(b) != list(range(b[0], b[0] + len(b))) for b in bends) or any(
             a[-1] + 1 != b[0] for a, b in zip(bends, bends[1:])):
         raise CodegenError("the C cascade expects each level's bend in consecutive variables")
@@ -593,8 +595,10 @@ def generate_sources(
         "NR": nr,
         "NP": npls,
         "NPRIORITIES": len(priorities),
+        # the first variable after the levels' own (DCTS: z), which solve.unbounded_solution frees
+        "FIRST_FREE": max((max(p.scaling + 1, bend_starts[k + 1]) for k, p in enumerate(priorities)), default=0),
         "PRIORITY_SCALING": ", ".join(str(p.scaling) for p in priorities) + (", 0" if priorities else "0"),
-        "PRIORITY_BEND": ", ".join(str(b[0]) for b in bends) + (f", {bends[-1][-1] + 1}" if bends else "0"),
+        "PRIORITY_BEND": ", ".join(map(str, bend_starts)),
         "SCALE_STEP": c_double(lexicographic.SCALE_STEP),
         "BEND_STEP": c_double(lexicographic.BEND_STEP),
         "PROXIMAL_ITERATIONS": lexicographic.PROXIMAL_ITERATIONS,
