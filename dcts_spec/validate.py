@@ -312,7 +312,7 @@ def _gains_at_the_period(spec: Spec) -> list[Diagnostic]:
     ẍ = kp Δx − kd ẋ is stable in discrete time only for kp T / 2 < kd < 2 / T (Jury's test on
     x, ẋ over one period). kd T ≥ 2 turns the damping over at every step (the velocity times
     1 − kd T): a stiff, critically damped task at 250 Hz (kp 1e5, kd 632) swung its torques between
-    the limits at every period. kd ≤ kp T / 2 (kd > 0) lets the oscillation grow."""
+    the limits at every period. kd ≤ kp T / 2 lets the oscillation grow (kd = 0 too, slowly)."""
     period, diags = spec.controller.period, []
     for i, task in enumerate(spec.tasks):
         kp, kd = (np.atleast_1d(np.asarray(v, dtype=float)) for v in (task.gains.kp, task.gains.kd))
@@ -320,7 +320,7 @@ def _gains_at_the_period(spec: Spec) -> list[Diagnostic]:
             continue  # (gains of different sizes: an error of their own)
         kp, kd = np.broadcast_arrays(kp, kd)
         over = kd * period >= 2.0
-        under = (kd > 0) & (kd <= kp * period / 2)
+        under = (kp > 0) & (kd <= kp * period / 2)
         if over.any():
             k = int(np.argmax(kd))
             diags.append(spec.source.diagnostic(
@@ -333,8 +333,8 @@ def _gains_at_the_period(spec: Spec) -> list[Diagnostic]:
             diags.append(spec.source.diagnostic(
                 ("tasks", i, "gains", "kd"),
                 f"kd = {kd[k]:g} 1/s is at most kp × controller.period / 2 = {kp[k] * period / 2:.3g}: at this period "
-                f"the task's oscillation grows; raise kd (critical damping: 2√kp = {2 * np.sqrt(kp[k]):.3g}) or "
-                f"shorten the period", "warning"))
+                f"the task's oscillation grows{' (undamped)' if kd[k] == 0 else ''}; raise kd (critical damping: "
+                f"2√kp = {2 * np.sqrt(kp[k]):.3g}) or shorten the period", "warning"))
     return diags
 
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from .formulations.parameters import ParameterError, build_parameters
+from .parameter_ramp import ramp_steps
 from .robot.model import Robot
 from .spec import Diagnostic, Spec
 from .spec.errors import did_you_mean
@@ -18,8 +19,8 @@ def check_parameters(spec: Spec, robot: Robot) -> list[Diagnostic]:
     if settings is None:
         return _check_schedule(spec, robot)
     period = spec.controller.period
-    if settings.ramp_time is not None and 0 < settings.ramp_time < period:
-        diags.append(src.diagnostic(("parameters", "ramp_time"), f"{settings.ramp_time:g} s is shorter than one control "
+    if settings.ramp_time and ramp_steps(settings.ramp_time, period) == 1:  # (0 asks for no ramp)
+        diags.append(src.diagnostic(("parameters", "ramp_time"), f"{settings.ramp_time:g} s is at most one control "
                                     f"period ({period:g} s): a new set is taken at once, with no ramp (a gain or limit "
                                     f"change steps the torque); use at least a few periods", "warning"))
     tasks = {t.name: t for t in spec.tasks}

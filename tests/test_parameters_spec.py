@@ -34,16 +34,16 @@ def test_a_valid_section_validates_and_keeps_the_ramp_default():
     assert spec.parameters.limit_groups() == ("joint_torque",)
 
 
-@pytest.mark.parametrize(("ramp_time", "warned"), [(0.0001, True), (0.0009, True), (0.0, False), (0.001, False),
-                                                   (0.005, False)])
+@pytest.mark.parametrize(("ramp_time", "warned"), [(0.0001, True), (0.0009, True), (0.001, True), (0.0, False),
+                                                   (0.0011, False), (0.005, False)])
 def test_a_ramp_shorter_than_a_period_is_a_warning(ramp_time, warned):
-    """A ramp_time below the period takes a new set at once, as 0 does, but reads as a ramp: a gain
-    change then stepped the torque by 100 Nm at 250 Hz (found from outside). 0 is the way to ask for
-    no ramp, and is not warned about."""
+    """A ramp_time of at most one period takes a new set at once (one step), as 0 does, but reads as
+    a ramp: a gain change then stepped the torque by 100 Nm at 250 Hz (found from outside). 0 is the
+    way to ask for no ramp, and is not warned about."""
     spec = load_spec_text(BASE + f"parameters:\n  ramp_time: {ramp_time}\n  tasks: {{tool: [kp]}}\n", "p.yaml")
     warnings = [str(d) for d in validate_spec(spec).diagnostics if d.severity == "warning" and "ramp" in str(d)]
     assert bool(warnings) == warned, warnings
-    assert all("p.yaml:11:" in w and "shorter than one control period" in w for w in warnings)
+    assert all("p.yaml:11:" in w and "at most one control period" in w for w in warnings)
 
 
 @pytest.mark.parametrize(("parameters", "line", "words"), [

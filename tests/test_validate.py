@@ -153,7 +153,8 @@ def test_a_lowest_priority_left_no_freedom_is_a_warning(tmp_path: Path) -> None:
     (0.004, [100, 100000, 100], [20, 100, 20], "kd = 100 1/s is at most"),  # one axis
     (0.001, 100000, 632, None),  # the same gains at 1 kHz: stable
     (0.004, 10000, 200, None),
-    (0.001, 100, 0, None),  # no damping asked for: not this warning
+    (0.001, 100, 0, "(undamped)"),  # kd = 0 with kp > 0: held over T the oscillation grows, slowly
+    (0.001, 0, 0, None),  # nothing asked for
 ])
 def test_gains_unstable_at_the_period_are_a_warning(tmp_path: Path, period, kp, kd, expected) -> None:
     """Each level gets its commanded acceleration exactly, so a task axis is a double integrator held
@@ -169,6 +170,19 @@ def test_gains_unstable_at_the_period_are_a_warning(tmp_path: Path, period, kp, 
         assert not found
     else:
         assert len(found) == 1 and found[0][0] == 6 and expected in found[0][1], found
+
+
+def test_max_velocity_needs_damping_only_where_there_is_stiffness(tmp_path: Path) -> None:
+    """With max_velocity, an axis with kp > 0 and kd = 0 asks for nothing (the saturated law is
+    kd (v (kp/kd)Δx − ẋ)): an error at its kd (tests/broken_specs). An axis with neither asks for
+    nothing either way and stays valid, as it was."""
+    spec = tmp_path / "mv.yaml"
+    spec.write_text("version: 1\nname: mv\nrobot: {model: iiwa14}\ntasks:\n"
+                    "  - {name: tool_position, type: position, frame: tool, priority: 1, gains: {kp: [100, 100, 0], "
+                    "kd: [20, 20, 0], max_velocity: 0.5}, reference: {position: [0.5, 0.0, 0.6]}}\n", encoding="utf-8")
+    validate_file(spec)
+    spec.write_text(spec.read_text().replace("kp: [100, 100, 0]", "kp: [100, 100, 1]"))
+    assert any("max_velocity needs kd > 0 where kp > 0" in m for m in _errors(spec).values())
 
 
 def test_warnings_through_the_cli(warning_specs: tuple[Path, Path]) -> None:
