@@ -315,10 +315,10 @@ def _gains_at_the_period(spec: Spec) -> list[Diagnostic]:
     the limits at every period. kd ≤ kp T / 2 lets the oscillation grow (kd = 0 too, slowly)."""
     period, diags = spec.controller.period, []
     for i, task in enumerate(spec.tasks):
-        kp, kd = (np.atleast_1d(np.asarray(v, dtype=float)) for v in (task.gains.kp, task.gains.kd))
-        if kp.size != kd.size and 1 not in (kp.size, kd.size):
-            continue  # (gains of different sizes: an error of their own)
-        kp, kd = np.broadcast_arrays(kp, kd)
+        axes = task.gains.axes()
+        if not axes:
+            continue
+        kp, kd = np.array(axes, dtype=float).T
         over = kd * period >= 2.0
         under = (kp > 0) & (kd <= kp * period / 2)
         if over.any():

@@ -42,21 +42,21 @@ class Gains(StrictModel):
     def _saturation_needs_stiffness(self) -> "Gains":
         if self.max_velocity is not None and not self.has_stiffness():
             raise FieldError("max_velocity", "max_velocity needs kp > 0 (it saturates the velocity (kp/kd)Δx)")
-        if self.max_velocity is not None and any(p > 0 and d == 0 for p, d in self._axes()):
+        if self.max_velocity is not None and any(p > 0 and d == 0 for p, d in self.axes()):
             # (the saturated law ẍ_d = kd (v ẋ_d − ẋ) asks for nothing where kd = 0: the task sat still)
             raise FieldError("kd", "max_velocity needs kd > 0 where kp > 0: the velocity-saturated law is "
                              "ẍ_d = kd (v (kp/kd)Δx − ẋ), so an axis with kd = 0 asks for no acceleration")
         return self
 
-    def _axes(self) -> list[tuple[float, float]]:
-        """(kp, kd) per axis, a scalar standing for every axis (sizes that differ: validate's error)."""
+    def axes(self) -> list[tuple[float, float]]:
+        """(kp, kd) per axis, a scalar standing for every axis; none where their sizes differ (an
+        error of validate's, at the task)."""
         kp = self.kp if isinstance(self.kp, tuple) else (self.kp,)
         kd = self.kd if isinstance(self.kd, tuple) else (self.kd,)
-        if len(kp) == 1:
-            kp = kp * len(kd)
-        if len(kd) == 1:
-            kd = kd * len(kp)
-        return list(zip(kp, kd))
+        if len(kp) != len(kd) and 1 not in (len(kp), len(kd)):
+            return []
+        size = max(len(kp), len(kd))
+        return list(zip(kp * (size // len(kp)), kd * (size // len(kd))))
 
     def has_stiffness(self) -> bool:
         values = self.kp if isinstance(self.kp, tuple) else (self.kp,)
