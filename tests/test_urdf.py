@@ -14,6 +14,7 @@ from dcts_spec.controller import build_controller
 from dcts_spec.limits.naming import joint_bound_text
 from dcts_spec.robot.describe import describe
 from dcts_spec.robot.model import JointLimits
+from dcts_spec.sim.runner import prepare_simulation
 from dcts_spec.robot.urdf import build_model, revolute_from_continuous
 from dcts_spec.spec import SpecError, load_spec
 from dcts_spec.validate import validate_spec
@@ -173,3 +174,39 @@ def test_a_joint_whose_urdf_limits_are_inverted_is_an_error(tmp_path):
     with pytest.raises(SpecError) as caught:
         validate_spec(load_spec(spec))
     assert "the URDF gives joint1 (1 > -1) a lower position limit above its upper one" in str(caught.value)
+
+
+def test_a_joint_and_a_link_named_alike_are_two_frames_and_the_link_keeps_the_name(tmp_path):
+    """A URDF may name a fixed joint and a link alike (example-robot-data's B1-Z1: `gripperStator`):
+    Pinocchio's lookup by that name raised, and every command exited with an internal error (3).
+    The link keeps the name, the joint's frame is `<name>_fixed_joint`; the spec's task, Cartesian
+    bound and push on that name validate and run."""
+    path = tmp_path / "roll_arm.urdf"
+    path.write_text(URDF.replace('<joint name="tool_joint"', '<joint name="tool"'))
+    model = build_model(path)
+    names = [frame.name for frame in model.frames]
+    assert names.count("tool") == 1 and "tool_fixed_joint" in names
+    assert model.frames[model.getFrameId("tool")].type == pin.FrameType.BODY
+    spec_file = tmp_path / "named_alike.yaml"
+    spec_file.write_text(f"""version: 1
+name: named_alike
+robot:
+  urdf: {path.name}
+limits:
+  cartesian:
+    - {{frame: tool, axis: z, min: -1.0}}
+tasks:
+  - {{name: tool, type: position, frame: tool, axes: [x], priority: 1, gains: {{kp: 100, kd: 20}},
+     reference: {{position: [0.1, 0.0, 0.0]}}}}
+  - {{name: posture, type: joint, priority: 2, gains: {{kp: 10, kd: 6}}, reference: {{q: [0.3, 0.2, 0.1]}}}}
+scenario:
+  duration: 0.05
+  disturbances:
+    - {{type: force, body: tool, force: [0, 0, -5], start: 0.01, duration: 0.02}}
+""")
+    spec = load_spec(spec_file)
+    validate_spec(spec)  # (raises SpecError for an error)
+    result = build_controller(spec).step(np.zeros(3), np.zeros(3), np.zeros(3))
+    assert result.status == 0
+    log = prepare_simulation(spec, "python").run()
+    assert np.isfinite(log.tau).all() and np.abs(log.tau_ext_true).max() > 0  # (the push reached the tool)

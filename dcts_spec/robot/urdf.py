@@ -9,6 +9,7 @@ takes the short way round to its target (tasks/joint.py). Its effort and velocit
 
 from __future__ import annotations
 
+from collections import Counter
 from pathlib import Path
 from xml.etree import ElementTree
 
@@ -45,11 +46,36 @@ def mimic_joints(path: Path) -> dict[str, str]:
             if (mimic := joint.find("mimic")) is not None}
 
 
+def unique_frame_names(model: pin.Model) -> list[str]:
+    """Give every frame its own name (in place); returns the new names. A URDF may name a joint
+    and a link alike (B1-Z1's fixed joint and link `gripperStator`), and Pinocchio's lookup by
+    name then raises for either: the link keeps the name, which is what a spec means by a frame
+    (a body), and the other frames of that name get their kind as a suffix
+    (`gripperStator_fixed_joint`), as `dcts describe` lists them."""
+    counts = Counter(frame.name for frame in model.frames)
+    renamed = []
+    for name in [name for name, count in counts.items() if count > 1]:
+        frames = [i for i, frame in enumerate(model.frames) if frame.name == name]
+        keep = next((i for i in frames if model.frames[i].type == pin.FrameType.BODY), frames[0])
+        for i in frames:
+            if i != keep:
+                new = f"{name}_{str(model.frames[i].type).rsplit('.', 1)[-1].lower()}"
+                while new in counts:
+                    new += "_"
+                counts[new] = 1
+                model.frames[i].name = new
+                renamed.append(new)
+    return renamed
+
+
 def build_model(path: Path) -> pin.Model:
-    """Pinocchio's model of the URDF at `path`, its continuous joints made revolute. Raises what
-    Pinocchio raises for a URDF it cannot read (and ElementTree's ParseError for a file that is
-    no XML)."""
+    """Pinocchio's model of the URDF at `path`, its continuous joints made revolute and its frame
+    names unique. Raises what Pinocchio raises for a URDF it cannot read (and ElementTree's
+    ParseError for a file that is no XML)."""
     root = ElementTree.parse(path).getroot()
     if not revolute_from_continuous(root):  # (the file as it is: urdfdom's messages name its lines)
-        return pin.buildModelFromUrdf(str(path))
-    return pin.buildModelFromXML(ElementTree.tostring(root, encoding="unicode"))
+        model = pin.buildModelFromUrdf(str(path))
+    else:
+        model = pin.buildModelFromXML(ElementTree.tostring(root, encoding="unicode"))
+    unique_frame_names(model)
+    return model
