@@ -27,6 +27,7 @@ from .parameter_ramp import ParameterRamp, ramp_steps
 from .robot.model import Robot
 from .solve import Structure, check_bounds, rounding_spread, solve_lexicographic, unbounded_solution
 from .spec import Spec, SpecError, load_spec
+from .symbolic.linalg import looped_products
 from .tasks import ReferenceInput
 from .validate import ValidationReport, validate_spec
 
@@ -55,6 +56,11 @@ ACTIVE_TOLERANCE = 1e-9
 # The state is beyond a bound's position or velocity limit if it is by more than this (rad, m,
 # rad/s or m/s): what "a bound crossed" means to the user.
 STATE_TOLERANCE = 1e-5
+# From this many QP-data operations (before common-subexpression elimination) on, the control law's
+# large products are kernel calls (`symbolic.linalg.looped_products`): unrolled, such QP data only
+# compile at -O0 (codegen/flags.py), which makes them slower than the looped code at -O1, and grow
+# like n³ (a serial chain of 32 joints: 215 k operations, 5.6 MB of code; 48 joints: 620 k, refused).
+LOOPED_PRODUCTS_FROM = 150_000
 DATA_OUTPUTS = ("H", "f", "A", "lba", "uba", "lbx", "ubx", "tau0", "T", "ddq0", "Q", "s0", "S", "p0", "P", "excess")
 
 
@@ -159,6 +165,11 @@ class Controller:
             raise ValueError(f"unknown formulation {self.formulation!r}; choose one of {', '.join(FORMULATIONS)}")
         self.problem = build_problem(spec, robot)
         self.law = control_law(spec, self.problem, self.formulation)
+        # (counted without CSE, which is what takes the time at these sizes)
+        self.looped = data_function(self.problem, self.law, cse=False).n_instructions() >= LOOPED_PRODUCTS_FROM
+        if self.looped:
+            with looped_products():
+                self.law = control_law(spec, self.problem, self.formulation)
         self.data = data_function(self.problem, self.law)
         self._ref_size = int(self.problem.ref.shape[0])  # (asking the SX each step costs microseconds)
         self._data_buffer: BufferedFunction | None = None

@@ -27,7 +27,7 @@ def test_bench_announces_each_stage(monkeypatch: pytest.MonkeyPatch, tmp_path: P
     controller = SimpleNamespace(robot=robot, problem=SimpleNamespace(levels=[]), ref_size=0,
                                  step=lambda *args: None, reset=lambda: None)
     manifest = {"name": "minimal", "formulation": "dcts", "nq": robot.nv, "nref": 0, "nx": 0, "na": 0,
-                "nlevels": 2, "workspace_bytes_host": 0, "qp_data_instructions": 0,
+                "nlevels": 2, "workspace_bytes_host": 0, "qp_data_instructions": 0, "qp_data_looped_products": False,
                 "host": {"compiler": "cc", "build_dir": "build"}}
     c_times = {"step": {"median_us": 1.0}}
     stand_ins = {

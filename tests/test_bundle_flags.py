@@ -117,7 +117,8 @@ def test_outputs_are_checked_once_not_at_every_store(sources: Path) -> None:
 def test_qp_data_too_large_for_a_compiler_are_refused_before_any_c(
         formulation: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """QP data beyond MAX_QP_DATA_OPERATIONS (the projector baseline on a 21-joint human model:
-    ~3 M operations, 74 MB of C, more memory than gcc had; dcts on a 48-joint serial chain: 620 k)
+    ~3 M operations, 74 MB of C, more memory than gcc had; dcts's unrolled QP data on a 48-joint serial
+    chain: 620 k, before they took looped products)
     are refused before any C is written, with what to do instead (dcts, whose QP data are the
     smallest, only for another formulation); nothing is left at the output path."""
     monkeypatch.setattr(bundle_module, "MAX_QP_DATA_OPERATIONS", 100)

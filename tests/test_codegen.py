@@ -338,6 +338,35 @@ def test_a_two_joint_arm_compiles_and_replays(tmp_path):
     assert "126 golden vectors" in report.manifest["host"]["test_summary"]
 
 
+def test_looped_products_compile_and_give_the_unrolled_numbers(tmp_path, monkeypatch):
+    """QP data beyond controller.LOOPED_PRODUCTS_FROM operations take their large products as calls
+    to looped kernels (a 32-joint chain's: 215 k → 99 k operations, -O0 → -O1; a 48-joint chain's,
+    refused before, compiles). Forced here on the 3-level spec: the bundle builds warning-free
+    (its kernels' CasADi helpers are static), without heap, and passes its golden test; the Python
+    runtime's steps are bit for bit those of the unrolled QP data."""
+    import dcts_spec.controller as controller_module
+
+    spec = tmp_path / "three_levels.yaml"
+    spec.write_text(THREE_LEVELS)
+    unrolled = build_controller(spec)
+    monkeypatch.setattr(controller_module, "LOOPED_PRODUCTS_FROM", 0)
+    looped = build_controller(spec)
+    assert looped.looped and not unrolled.looped
+    assert looped.data.n_instructions() < unrolled.data.n_instructions()
+    sampler = StateSampler(unrolled, seed=3)
+    for state in [sampler.random() for _ in range(5)] + [sampler.near_limit() for _ in range(5)]:
+        mine, theirs = looped.step(*state.as_tuple()), unrolled.step(*state.as_tuple())
+        assert mine.status == theirs.status
+        np.testing.assert_array_equal(mine.tau, theirs.tau)
+    report = compile_bundle(spec, tmp_path / "bundle", golden_count=40)  # (a failed build or golden test raises)
+    assert report.manifest["qp_data_looped_products"] and report.manifest["built"]
+    source = (tmp_path / "bundle" / "three_levels_casadi.c").read_text()
+    assert "casadi_mtimes" in source
+    # a kernel call's failure is a flag returned at the end, not a branch there (Thumb-2's conditional
+    # branches reach ±1 MB: arm-none-eabi-gcc -O1 refused a 32-joint chain's QP data)
+    assert "failed |= casadi_f" in source and not re.search(r"if \(casadi_f\d+\(", source)
+
+
 def test_an_ignored_tau_ext_is_not_read(tmp_path):
     """With `external_torque: ignored` neither runtime reads tau_ext: a NaN there (a broken sensor the
     spec says not to use) gives the torque of tau_ext = 0 and status 0, not the fallback (it gave

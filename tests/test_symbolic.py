@@ -12,7 +12,8 @@ import pytest
 
 from dcts_spec.robot.builtin import example_robot_data_dir, load_builtin_model, random_configuration
 from dcts_spec.symbolic import SymbolicRobot
-from dcts_spec.symbolic.linalg import cholesky, cholesky_solve, spd_inverse, symmetric_product, triangular_inverse
+from dcts_spec.symbolic.linalg import (cholesky, cholesky_solve, looped_products, product, spd_inverse, symmetric_product,
+                                       triangular_inverse)
 
 N_STATES = 100
 TOL = 1e-9
@@ -245,6 +246,31 @@ def test_symmetric_product_is_the_product_at_half_the_operations() -> None:
     assert half < 0.65 * full, (half, full)  # (both count the 63 inputs and 81 outputs too)
     with pytest.raises(ValueError, match="same shape"):
         symmetric_product(a, ca.SX.sym("b", n, k + 1))
+
+
+def test_looped_products_are_kernel_calls_with_the_same_numbers() -> None:
+    """Within looped_products, a large product or Gram matrix is a call to one MX kernel (its
+    arithmetic is not in the caller's instructions, and CasADi emits the kernel once), with the
+    unrolled product's numbers bit for bit and its structural zeros; a small one stays unrolled."""
+    rng = np.random.default_rng(6)
+    n, k = 9, 12
+    a, b = ca.SX.sym("a", n, k), ca.SX.sym("b", k, n)
+    a_sparse = ca.project(a, ca.DM(np.tril(np.ones((n, k)))).sparsity())  # (structural zeros, as a tree's M has)
+    small = ca.SX.sym("s", 2, 2)
+    expressions = lambda: [product(a_sparse, b), symmetric_product(b, b), product(small, small)]  # noqa: E731
+    unrolled = ca.Function("unrolled", [a, b, small], expressions())
+    with looped_products():
+        looped = ca.Function("looped", [a, b, small], expressions())
+    assert product(a, b).sparsity() == ca.mtimes(a, b).sparsity()  # (outside: the plain product)
+    assert looped.n_instructions() < 0.2 * unrolled.n_instructions()
+    inputs = [rng.normal(size=(n, k)), rng.normal(size=(k, n)), rng.normal(size=(2, 2))]
+    for mine, theirs in zip(looped(*inputs), unrolled(*inputs)):
+        assert mine.sparsity() == theirs.sparsity()
+        assert np.array_equal(np.array(mine), np.array(theirs))
+    source = ca.CodeGenerator("looped.c")
+    source.add(looped)
+    text = source.dump()
+    assert text.count("casadi_mtimes(") >= 2  # (the kernels' loops)
 
 
 def test_cholesky_factors_and_solves() -> None:

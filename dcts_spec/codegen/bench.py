@@ -316,6 +316,7 @@ def bench(spec_file: str | Path, formulation: str | None = None, states: int = 1
         "text_bytes": sizes,
         "instructions_per_step": instructions,
         "qp_data_instructions": manifest["qp_data_instructions"],
+        "qp_data_looped_products": manifest["qp_data_looped_products"],
         "state_generation_s": generation_s,
     }
     return result

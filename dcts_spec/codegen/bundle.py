@@ -146,6 +146,7 @@ _PARAMETER_NAME = re.compile(r"(\w+)\s*(?:\[\s*\w*\s*\])?\s*$")
 # try at -O2 took TALOS's 28 joints from 0.94 to 1.15 GB.
 _HELPER_CALL = re.compile(r"\bcasadi_(sq|fabs)\((a\d+)\)")
 _MIN_MAX_CALL = re.compile(r"\bcasadi_(fmin|fmax)\((a\d+),(a\d+)\)")
+_VOID_HELPER_DEFINITION = re.compile(r"^void casadi_\w+\(")
 _HELPER_DEFINITION = re.compile(r"^(casadi_real casadi_(?:sq|fabs|fmin|fmax)\([^()]*\))")
 _HELPER_MACROS = """/* dcts: CasADi's sq and fabs as expressions in the generated functions (patch_casadi_source) */
 #define DCTS_SQ(x) ((x)*(x))
@@ -160,6 +161,7 @@ _MIN_MAX_MACROS = """/* dcts: and fmin and fmax, as C99 has them for NaN (the ot
 
 _OUTPUT_STORE = re.compile(r"^  if \(res\[(\d+)\]!=0\) (res\[\d+\]\[\d+\]=a\d+;)$")
 _GENERATED_FUNCTION = re.compile(r"^static int casadi_f\d+\(const casadi_real\*\* arg, casadi_real\*\* res, ")
+_CALL_OR_RETURN = re.compile(r"^  if \((casadi_f\d+\(.*\))\) return 1;$")
 
 
 def unconditional_outputs(text: str) -> str:
@@ -187,6 +189,32 @@ def unconditional_outputs(text: str) -> str:
     return "\n".join(out) + "\n"
 
 
+def calls_without_early_returns(text: str) -> str:
+    """A generated function's calls of other generated functions (looped products' kernels) report
+    a failure in a flag it returns at its end, instead of returning at once: `if (casadi_f1(…))
+    return 1;` becomes `failed |= casadi_f1(…);`. The same result for the wrapper (nonzero: the QP
+    data failed), without a conditional branch to the end of a function of megabytes, beyond what
+    a Thumb-2 conditional branch reaches (±1 MB): arm-none-eabi-gcc -O1 stopped with "conditional
+    branch out of range" on a 32-joint chain's looped QP data."""
+    out: list[str] = []
+    start, calls = None, False
+    for line in text.splitlines():
+        if _GENERATED_FUNCTION.match(line):
+            start, calls = len(out) + 1, False
+        call = _CALL_OR_RETURN.match(line) if start is not None else None
+        if call:
+            line, calls = f"  failed |= {call.group(1)};", True
+        elif line == "}" and start is not None:
+            if calls:
+                if out[-1] != "  return 0;":
+                    raise CodegenError("a CasADi-generated function does not end with `return 0;`")
+                out[-1] = "  return failed;"
+                out.insert(start, "  int failed = 0;")
+            start = None
+        out.append(line)
+    return "\n".join(out) + "\n"
+
+
 def patch_casadi_source(text: str, min_max_macros: bool = False, header: str | None = None) -> str:
     """Make CasADi's generated C build warning-free under C_WARNINGS (-Wmissing-prototypes and
     -Wdouble-promotion included, as firmware projects build), and check it.
@@ -196,10 +224,11 @@ def patch_casadi_source(text: str, min_max_macros: bool = False, header: str | N
     (the prototypes of what it exports), and CasADi's scalar helpers get a prototype each (made
     static instead, the ones the macros below leave unused would be an error under clang). The
     calls of sq and fabs become macros (`_HELPER_CALL`), and fmin and fmax too with `min_max_macros`
-    (`_MIN_MAX_CALL`); the output stores lose their null checks (`unconditional_outputs`). The
+    (`_MIN_MAX_CALL`); the output stores lose their null checks (`unconditional_outputs`), and the
+    calls of other generated functions their early returns (`calls_without_early_returns`). The
     file is then checked: no heap calls and no mutable static data (only const sparsity patterns
     may be static)."""
-    lines = unconditional_outputs(text).splitlines()
+    lines = calls_without_early_returns(unconditional_outputs(text)).splitlines()
     out: list[str] = []
     for line in lines:
         if line.startswith("#include <math.h>"):
@@ -210,6 +239,8 @@ def patch_casadi_source(text: str, min_max_macros: bool = False, header: str | N
         helper = _HELPER_DEFINITION.match(line)
         if helper:
             out.append(f"{helper.group(1)};")
+        elif _VOID_HELPER_DEFINITION.match(line):  # (the loops of looped products' kernels: casadi_mtimes…)
+            line = "static " + line  # (-Wmissing-prototypes; CasADi emits only the helpers it calls)
         line = _HELPER_CALL.sub(lambda call: f"DCTS_{call.group(1).upper()}({call.group(2)})", line)
         if min_max_macros:
             line = _MIN_MAX_CALL.sub(lambda call: f"DCTS_{call.group(1).upper()}({call.group(2)}, {call.group(3)})", line)
@@ -723,6 +754,8 @@ def generate_sources(
         "bound_tolerance": BOUND_TOLERANCE,
         "qp_data_instructions": work["instructions"],
         "qp_data_optimization": list(qp_data_optimization(work["instructions"])),
+        # the large products as calls to looped kernels (controller.LOOPED_PRODUCTS_FROM)
+        "qp_data_looped_products": bool(controller.looped),
         "casadi_work": {k: work[k] for k in ("sz_arg", "sz_res", "sz_iw", "sz_w")},
         "golden": {"count": len(states), "statuses": statuses,
                    # vectors whose answer rounding-size changes of the data move beyond the tolerance,

@@ -30,7 +30,7 @@ from __future__ import annotations
 
 import casadi as ca
 
-from ..symbolic.linalg import null_space_basis, symmetric_product
+from ..symbolic.linalg import null_space_basis, product, symmetric_product
 from .hierarchy import NULL_SPACE_REGULARIZATION, least_squares_objective, level_structure, recursive_hierarchy
 from .problem import ControlProblem
 from .qp import INF, Affine, ControlLaw, PriorityVariables, with_limits
@@ -83,13 +83,13 @@ def dcts(problem: ControlProblem) -> ControlLaw:
         matrix[:, z] = Z
         if structure.least_squares_last:
             last = levels[-1]
-            mass_acceleration = ca.mtimes(problem.mass_matrix, matrix)  # (the torque rows' too)
+            mass_acceleration = product(problem.mass_matrix, matrix)  # (the torque rows' too)
             Hx, fx = least_squares_objective(last, Affine(a.offset, matrix), mass_acceleration)
             H += Hx
             f += fx
             notes.append(f"priority {last.priority} is over-constrained: solved in least squares")
         else:
-            H[z, z] = symmetric_product(Z, ca.mtimes(problem.mass_matrix, Z))
+            H[z, z] = symmetric_product(Z, product(problem.mass_matrix, Z))
         if released:
             complement = ca.SX.eye(n) - N
             H[z, z] += NULL_SPACE_REGULARIZATION * symmetric_product(complement, complement)
@@ -105,6 +105,6 @@ def dcts(problem: ControlProblem) -> ControlLaw:
     if structure.least_squares_last:
         # its scaling is filled in after the solve (controller), from its task acceleration
         scaling.offset[-1] = 1.0
-        law.least_squares_task = (ca.mtimes(levels[-1].jacobian, acceleration.matrix),
+        law.least_squares_task = (product(levels[-1].jacobian, acceleration.matrix),
                                   ca.mtimes(levels[-1].jacobian, acceleration.offset) + levels[-1].bias)
     return law

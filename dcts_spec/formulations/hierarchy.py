@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from ..symbolic.linalg import cholesky, cholesky_solve, spd_inverse, symmetric_product
+from ..symbolic.linalg import cholesky, cholesky_solve, product, spd_inverse, symmetric_product
 from .problem import ControlProblem, Level
 from .qp import Affine
 
@@ -95,16 +95,16 @@ def recursive_hierarchy(
     N = ca.SX.eye(n) if projector is None else projector
     for level, v in zip(problem.levels, commands):
         J = level.jacobian
-        Jr = ca.mtimes(J, N)
-        Minv_JrT = ca.mtimes(Minv, Jr.T)
+        Jr = product(J, N)
+        Minv_JrT = product(Minv, Jr.T)
         # (its unrestricted scale from diag(M⁻¹): m·n operations, where J M⁻¹ Jᵀ would take m·n²)
         unrestricted = ca.dot(ca.sum1(J * J).T, ca.diag(Minv)) / J.shape[0]
-        Jbar = ca.mtimes(Minv_JrT, damped_inverse(symmetric_product(Jr.T, Minv_JrT), unrestricted))
+        Jbar = product(Minv_JrT, damped_inverse(symmetric_product(Jr.T, Minv_JrT), unrestricted))
         if level.activation is not None:
             Jbar = ca.mtimes(Jbar, ca.diag(level.activation))
         offset = offset + ca.mtimes(Jbar, v.offset - level.bias - ca.mtimes(J, offset))
-        matrix = matrix + ca.mtimes(Jbar, v.matrix - ca.mtimes(J, matrix))
-        N = N - ca.mtimes(Jbar, Jr)
+        matrix = matrix + product(Jbar, v.matrix - product(J, matrix))
+        N = N - product(Jbar, Jr)
     return Affine(offset, matrix), N
 
 
@@ -122,7 +122,7 @@ def least_squares_objective(level: Level, acceleration: Affine, mass_acceleratio
     met in least squares, the rest at minimum energy. A damped task-space inverse
     (J N M⁻¹ NᵀJᵀ + λ²I)⁻¹ would be hopelessly ill-conditioned there instead.
     """
-    G = ca.mtimes(level.jacobian, acceleration.matrix)
+    G = product(level.jacobian, acceleration.matrix)
     residual = ca.mtimes(level.jacobian, acceleration.offset) + level.bias - level.target
     energy_weight = LEAST_SQUARES_ENERGY_RATIO
     if level.activation is not None:
@@ -153,7 +153,7 @@ def _constant_full_column_rank(jacobian: ca.SX) -> bool:
 
 def least_squares_step(level: Level, acceleration: ca.SX, N: ca.SX, mass: ca.SX) -> ca.SX:
     """The acceleration after a level solved in least squares within range(N)."""
-    hessian, gradient = least_squares_objective(level, Affine(acceleration, N), ca.mtimes(mass, N))
+    hessian, gradient = least_squares_objective(level, Affine(acceleration, N), product(mass, N))
     # z and N z are redundant along null(N); γ‖(I − N)z‖² fixes those components without biasing N z.
     complement = ca.SX.eye(N.shape[0]) - N
     z = cholesky_solve(cholesky(hessian + NULL_SPACE_REGULARIZATION * symmetric_product(complement, complement)),

@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 
 import casadi as ca
 
+from ..symbolic.linalg import product
 from .problem import ControlProblem
 
 INF = float("inf")
@@ -126,12 +127,12 @@ def with_limits(
     acceleration's matrix, if the caller has it already (the same product, not a second one).
     """
     if mass_acceleration is None:
-        mass_acceleration = ca.mtimes(problem.mass_matrix, acceleration.matrix)
+        mass_acceleration = product(problem.mass_matrix, acceleration.matrix)
     torque = Affine(problem.torque(acceleration.offset), mass_acceleration)
     rows = problem.acceleration_rows
     R_c = ca.mtimes(rows.matrix, acceleration.offset) + rows.offset
     tau_max = problem.torque_limit
-    A = ca.vertcat(torque.matrix, ca.mtimes(rows.matrix, acceleration.matrix))
+    A = ca.vertcat(torque.matrix, product(rows.matrix, acceleration.matrix))
     lba = ca.vertcat(-tau_max - torque.offset, rows.lower - R_c)
     uba = ca.vertcat(tau_max - torque.offset, rows.upper - R_c)
     levels = [RowLevel("torque limits", HARD, problem.n), RowLevel("joint and Cartesian bounds", BOUNDS, len(rows))]
