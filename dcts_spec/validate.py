@@ -160,11 +160,13 @@ def validate_spec(spec: Spec) -> ValidationReport:
     over = np.flatnonzero(np.abs(gravity) > robot.limits.tau_max)
     if over.size:
         j = over[0]
+        unit = "N" if robot.prismatic[j] else "Nm"  # (a prismatic joint's force)
         diags.append(
             spec.source.diagnostic(
                 ("limits", "joint_torque") if spec.limits.joint_torque else ("robot",),
                 f"the torque limits cannot hold the robot against gravity at the initial configuration "
-                f"(joint {j + 1} needs {abs(gravity[j]):.1f} Nm, limit {robot.limits.tau_max[j]:.1f} Nm)",
+                f"(joint {j + 1}, {robot.joint_names[j]}, needs {abs(gravity[j]):.1f} {unit}, limit "
+                f"{robot.limits.tau_max[j]:.1f} {unit})",
                 "warning",
             )
         )

@@ -489,3 +489,20 @@ def test_a_closed_form_reports_its_bounds_unchecked_not_held():
         assert run.summary["bounds_checked"] is checked
         assert (run.summary["limits_relaxed"] is None) is not checked
         assert ("bounds not checked (osc is a closed form" in describe(run)) is not checked
+
+
+def test_the_share_of_a_limit_names_its_joint_where_it_is_not_the_largest_values():
+    """A PR2's largest torque step was its prismatic lift's 1,132 N (11 % of its limit) and the
+    largest share of a limit its shoulder's 188 %: the line said "1.13e+03 N (188% of its limit)"
+    (found from outside). Now it names both joints where they differ."""
+    from types import SimpleNamespace
+
+    from dcts_spec.analysis.report import share_of_limit
+
+    summary = {"max_torque_jump": 1132.0, "max_torque_jump_ratio": 1.88,
+               "worst_joints": {"max_torque_jump": "torso_lift", "max_torque_jump_ratio": "r_shoulder_pan"}}
+    assert share_of_limit(SimpleNamespace(summary=summary), "max_torque_jump") == \
+        "on torso_lift; 188% of r_shoulder_pan's limit"
+    summary["worst_joints"]["max_torque_jump_ratio"] = "torso_lift"
+    summary["max_torque_jump_ratio"] = 0.113
+    assert share_of_limit(SimpleNamespace(summary=summary), "max_torque_jump") == "11.3% of its limit"

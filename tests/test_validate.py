@@ -353,6 +353,18 @@ def test_a_prismatic_joints_values_stay_in_metres_under_an_angle_unit(tmp_path: 
     assert resolve_scenario(report.spec, robot).dq0[:2] == pytest.approx([0.1, math.radians(5)])
 
 
+def test_the_gravity_warning_names_the_joint_and_a_prismatic_joints_force_in_n(tmp_path: Path) -> None:
+    """The torque limits too weak for gravity: the warning said "joint 1 needs 78.5 Nm" of a lift
+    (found from outside, on a PR2's torso): now the joint's name, and N for a prismatic joint."""
+    (tmp_path / "lift.urdf").write_text(LIFT_URDF)
+    spec = tmp_path / "lift.yaml"
+    spec.write_text("version: 1\nname: lift\nrobot: {urdf: lift.urdf}\nlimits:\n  joint_torque: {max: [50, 50, 50]}\n"
+                    "tasks:\n  - {name: posture, type: joint, priority: 1, gains: {kp: 10, kd: 6}, "
+                    "reference: {q: [0.2, 0.1, 0.2]}}\n")
+    warnings = [d.message for d in validate_file(spec).diagnostics if d.severity == "warning"]
+    assert any("(joint 1, lift, needs 78.5 N, limit 50.0 N)" in w for w in warnings), warnings
+
+
 @pytest.mark.parametrize(("inertia", "severity", "words"), [
     ('ixx="0.02" iyy="0.02" izz="0.05" ixy="0" ixz="0" iyz="0"', "warning", "break A + B ≥ C"),  # (CAD rounding)
     ('ixx="0.02" iyy="0.02" izz="0.02" ixy="0.05" ixz="0" iyz="0"', "error", "not positive definite"),

@@ -47,7 +47,8 @@ applied then, ramps included):
   much at worst (max_k d_min − d_k, m), for how many steps, the first and last time;
   max_collision_violation = the largest of those (0 when every pair kept its minimum)
 - waypoints_reached = points reached (None without waypoints); waypoint_times: when each was, or None
-- worst_joints[metric] = the joint where each per-joint maximum above is reached (None where it is 0)
+- worst_joints[metric] = the joint where each per-joint maximum above is reached, ratios included
+  (None where it is 0)
 - realtime_factor = simulated time / wall time of the simulation loop (controller, physics and
   logging; not the viewer, video or progress display)
 
@@ -113,6 +114,10 @@ def summarize(log: SimulationLog, series: TimeSeries, robot: Robot, priorities: 
         "max_external_torque_estimate_error": np.abs(series.tau_ext_used[1:] - disturbance[:-1]),
     }
     peak = {key: _peak(values) for key, values in per_joint.items()}
+    ratios = {  # (over each joint's own limit: their peak may be at another joint than the value's)
+        "max_joint_velocity_violation_ratio": velocity_excess / lim.v_max,
+        "max_torque_jump_ratio": torque_jump / lim.tau_max[1:],
+    }
     summary: dict[str, Any] = {
         "duration": log.duration,
         "steps": log.steps,
@@ -120,14 +125,14 @@ def summarize(log: SimulationLog, series: TimeSeries, robot: Robot, priorities: 
         "diverged_at": log.diverged_at,
         "max_joint_position_violation": peak["max_joint_position_violation"],
         "max_joint_velocity_violation": peak["max_joint_velocity_violation"],
-        "max_joint_velocity_violation_ratio": _peak(velocity_excess / lim.v_max),
+        "max_joint_velocity_violation_ratio": _peak(ratios["max_joint_velocity_violation_ratio"]),
         "max_torque_violation": peak["max_torque_violation"],
         "max_cartesian_violation": _cartesian_violation(series, robot),
         "max_cartesian_velocity_violation": _peak(np.array([
             _peak(_excess(np.abs(b.coordinate(series.frame_velocities[b.frame])), np.array(b.v_max)))
             for b in robot.cartesian_bounds if np.isfinite(b.v_max)])),
         "max_torque_jump": peak["max_torque_jump"],
-        "max_torque_jump_ratio": _peak(torque_jump / lim.tau_max[1:]),
+        "max_torque_jump_ratio": _peak(ratios["max_torque_jump_ratio"]),
         "torque_jump_steps": int(np.count_nonzero((torque_jump > TORQUE_JUMP_FRACTION * lim.tau_max[1:]).any(axis=1))),
         "max_controller_acceleration": peak["max_controller_acceleration"],
         "joint_acceleration_limits": bool(np.isfinite(lim.a_max).any()),
@@ -154,7 +159,7 @@ def summarize(log: SimulationLog, series: TimeSeries, robot: Robot, priorities: 
         "waypoints_total": int(waypoints.size),
         "waypoints_reached": int(np.count_nonzero(np.isfinite(waypoints))) if waypoints.size else None,
         "waypoint_times": [None if math.isnan(t) else float(t) for t in waypoints],
-        "worst_joints": {key: _worst_joint(values, robot) for key, values in per_joint.items()},
+        "worst_joints": {key: _worst_joint(values, robot) for key, values in {**per_joint, **ratios}.items()},
         "wall_time": log.wall_time,
         "realtime_factor": log.duration / log.wall_time if log.wall_time > 0 else None,
     }

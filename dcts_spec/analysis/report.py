@@ -29,6 +29,19 @@ def peak_unit(run: RunResult, key: str) -> str:
     return joint_peak_units(run.robot, [run.robot.joint_names.index(worst[key])])[key]
 
 
+def share_of_limit(run: RunResult, key: str) -> str:
+    """`12.6% of its limit`, or where the largest share of a limit is at another joint than the
+    largest value (a prismatic lift's 1,132 N is 11 % of its limit; a shoulder's 56 Nm, 188 %):
+    `on torso_lift; 188% of r_shoulder_pan's limit`."""
+    s = run.summary
+    share = f"{100 * s[key + '_ratio']:.3g}%"
+    worst = s.get("worst_joints", {})
+    joint, joint_of_ratio = worst.get(key), worst.get(key + "_ratio")
+    if joint == joint_of_ratio or joint is None or joint_of_ratio is None:
+        return f"{share} of its limit"
+    return f"on {joint}; {share} of {joint_of_ratio}'s limit"
+
+
 def min_scaling_text(summary: dict[str, Any]) -> str:
     """`0.42 (priority 2: posture, at t = 1.234 s)` or `1 (never scaled)`."""
     at = summary.get("min_scaling_at")
@@ -51,13 +64,13 @@ def describe(run: RunResult) -> str:
         return quantity(s[key], peak_unit(run, key))
 
     lines.append(f"  limits     worst excess: position {q('max_joint_position_violation')}, velocity "
-                 f"{q('max_joint_velocity_violation')} ({100 * s['max_joint_velocity_violation_ratio']:.3g}% "
-                 f"of its limit), torque {q('max_torque_violation')}, Cartesian {q('max_cartesian_violation')}"
+                 f"{q('max_joint_velocity_violation')} ({share_of_limit(run, 'max_joint_velocity_violation')}), "
+                 f"torque {q('max_torque_violation')}, Cartesian {q('max_cartesian_violation')}"
                  + (f" (speed {q('max_cartesian_velocity_violation')})" if s.get("max_cartesian_velocity_violation")
                     else "")
                  + (f", collision {q('max_collision_violation')}" if "max_collision_violation" in s else ""))
     smoothness = (f"  smoothness torque steps between periods up to {q('max_torque_jump')} "
-                  f"({100 * s['max_torque_jump_ratio']:.3g}% of its limit; {s['torque_jump_steps']} above "
+                  f"({share_of_limit(run, 'max_torque_jump')}; {s['torque_jump_steps']} above "
                   f"{100 * TORQUE_JUMP_FRACTION:g}%), the controller's joint accelerations up to {q('max_controller_acceleration')}")
     if s["torque_jump_steps"] and not s["joint_acceleration_limits"]:
         smoothness += " (no limits.joint_acceleration: the velocity limits alone allow 2 q̇_max/T a step)"
