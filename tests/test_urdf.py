@@ -210,3 +210,28 @@ scenario:
     assert result.status == 0
     log = prepare_simulation(spec, "python").run()
     assert np.isfinite(log.tau).all() and np.abs(log.tau_ext_true).max() > 0  # (the push reached the tool)
+
+
+@pytest.mark.parametrize(("limit", "severity", "words"), [
+    ('<limit lower="-2" upper="2" velocity="2"/>', "error", "joint shoulder (revolute) has no effort"),
+    ('<limit lower="-2" upper="2"/>', "error", "joint shoulder (revolute) has no effort or velocity"),
+    ('<limit lower="-2" upper="2" effort="0" velocity="2"/>', "warning", "gives shoulder, wrist_roll no effort limit"),
+])
+def test_a_urdf_joint_without_its_limits_is_named(tmp_path, limit, severity, words):
+    """urdfdom refuses a revolute joint whose <limit> lacks effort or velocity with "does not contain
+    a valid URDF model", naming nothing: the error names the joint and what is missing. An effort of
+    0 reads as no limit, which was silent (iCub-like URDFs, found from outside): a warning."""
+    path = tmp_path / "roll_arm.urdf"
+    urdf = URDF.replace('<limit lower="-2" upper="2" effort="80" velocity="2"/>', limit)
+    assert urdf != URDF
+    path.write_text(urdf)
+    spec_file = tmp_path / "arm.yaml"
+    spec_file.write_text(f"version: 1\nname: arm\nrobot:\n  urdf: {path.name}\ntasks:\n"
+                         "  - {name: posture, type: joint, priority: 1, gains: {kp: 10, kd: 6}, reference: {q: [0.3, 0.2, 0.1]}}\n")
+    if severity == "error":
+        with pytest.raises(SpecError) as raised:
+            validate_spec(load_spec(spec_file))
+        assert words in str(raised.value)
+    else:
+        messages = [d.message for d in validate_spec(load_spec(spec_file)).diagnostics if d.severity == severity]
+        assert any(words in m for m in messages), messages

@@ -54,6 +54,13 @@ def resolve_robot(spec: Spec) -> tuple[Robot, list[Diagnostic]]:
         diags.append(src.diagnostic(
             ("robot",), f"the URDF gives {', '.join(rangeless)} no position range (lower = upper): driven without "
                         f"position limits; give limits.joint_position to bound them", "warning"))
+    for key, attribute, values in (("joint_velocity", "velocity", urdf_limits.v_max),
+                                   ("joint_torque", "effort", urdf_limits.tau_max)):
+        unlimited = [model.names[j] for j in range(1, model.njoints) if not np.isfinite(values[model.joints[j].idx_v])]
+        if unlimited and getattr(spec.limits, key) is None:  # (0 in a URDF is read as none, silently before)
+            diags.append(src.diagnostic(
+                ("robot",), f"the URDF gives {', '.join(unlimited)} no {attribute} limit ({attribute}=\"0\" or none): "
+                            f"driven without one; give limits.{key} to bound them", "warning"))
     limits = _merge_limits(spec, urdf_limits, prismatic_joints(model), diags)
     bounds = _cartesian_bounds(spec, model, diags)
     if any(d.severity == "error" for d in diags):

@@ -38,6 +38,21 @@ def revolute_from_continuous(root: ElementTree.Element) -> list[str]:
     return names
 
 
+def check_limit_elements(root: ElementTree.Element) -> None:
+    """urdfdom refuses a revolute or prismatic joint without a <limit> giving effort and velocity, and
+    says only that the file "does not contain a valid URDF model": raise naming the joint instead."""
+    for joint in root.iter("joint"):
+        if joint.get("type") not in ("revolute", "prismatic"):
+            continue
+        limit = joint.find("limit")
+        missing = ["<limit>"] if limit is None else [a for a in ("effort", "velocity") if limit.get(a) is None]
+        if missing:
+            raise ValueError(f"joint {joint.get('name', '?')} ({joint.get('type')}) has no {' or '.join(missing)}, "
+                             "which the URDF format requires of a revolute or prismatic joint; give its "
+                             "<limit effort=... velocity=...> (0 for none: then set limits.joint_torque or "
+                             "limits.joint_velocity in the spec)")
+
+
 def mimic_joints(path: Path) -> dict[str, str]:
     """The URDF's mimic joints: joint name → the joint it follows. Pinocchio reads them as joints
     of their own, which the controller would drive independently."""
@@ -73,6 +88,7 @@ def build_model(path: Path) -> pin.Model:
     names unique. Raises what Pinocchio raises for a URDF it cannot read (and ElementTree's
     ParseError for a file that is no XML)."""
     root = ElementTree.parse(path).getroot()
+    check_limit_elements(root)
     if not revolute_from_continuous(root):  # (the file as it is: urdfdom's messages name its lines)
         model = pin.buildModelFromUrdf(str(path))
     else:
