@@ -196,14 +196,18 @@ def _check_cartesian_bounds(spec: Spec, robot: Robot, q0: np.ndarray) -> list[Di
                 f"configuration), less than the {b.a_max:g} m/s² this bound counts on to brake before it: near the "
                 f"bound it can be crossed (status \"limits relaxed\"); give it max_acceleration: {_round_down(reach)} "
                 "or less", "warning"))
-        for frame, at, what, position in targets:
+        for task, at, what, position in targets:
             target = float(b.coordinate(position))
-            if frame == b.frame and not b.c_min <= target <= b.c_max:
+            if task.frame == b.frame and not b.c_min <= target <= b.c_max:
+                # (a level's tasks share its scaling: a bounded foot stopped the other feet of its level)
+                peers = [t.name for t in spec.tasks if t.priority == task.priority and t.name != task.name]
+                shared = (f"; {', '.join(peers)}, at the same priority, share that scaling and are no longer "
+                          "driven either: give them a priority of their own to keep them tracking") if peers else ""
                 diags.append(spec.source.diagnostic(
                     at, f"{what} puts {b.frame}.{b.label} at {target:.4g} m, outside its bound {text} "
                         f"(limits.cartesian[{i}]): at the bound its scaling falls to 0 (direction kept), so it stops "
-                        f"accelerating {b.frame}, and motion along the bound is no longer damped; put the target "
-                        f"inside", "warning"))
+                        f"accelerating {b.frame}, and motion along the bound is no longer damped{shared}; put the "
+                        f"target inside", "warning"))
     return diags
 
 
@@ -226,18 +230,18 @@ def _round_down(value: float) -> str:
     return f"{np.floor(value / step) * step:.10g}"
 
 
-def _position_targets(spec: Spec) -> list[tuple[str, tuple, str, np.ndarray]]:
-    """(frame, key path, wording, position) of every constant position target: the references
+def _position_targets(spec: Spec) -> list[tuple[TaskSpec, tuple, str, np.ndarray]]:
+    """(task, key path, wording, position) of every constant position target: the references
     of position and pose tasks, and the waypoints of such a task (their position comes first)."""
     out = []
     for k, t in enumerate(spec.tasks):
         if t.type not in ("position", "pose"):
             continue
         if t.reference is not None and t.reference.position is not None:
-            out.append((t.frame, ("tasks", k, "reference", "position"), "the target", np.asarray(t.reference.position, dtype=float)))
+            out.append((t, ("tasks", k, "reference", "position"), "the target", np.asarray(t.reference.position, dtype=float)))
         waypoints = spec.scenario.waypoints if spec.scenario is not None else None
         if waypoints is not None and waypoints.task == t.name:
-            out += [(t.frame, ("scenario", "waypoints", "points", j), "this waypoint", np.asarray(p[:3], dtype=float))
+            out += [(t, ("scenario", "waypoints", "points", j), "this waypoint", np.asarray(p[:3], dtype=float))
                     for j, p in enumerate(waypoints.points)]
     return out
 

@@ -575,3 +575,19 @@ def test_a_bundle_of_a_spec_edited_in_python_records_the_edited_spec(tmp_path):
     assert manifests[0]["spec_sha256"] != manifests[1]["spec_sha256"]
     assert b"The smallest useful spec" in (tmp_path / "as_file" / "spec.yaml").read_bytes()  # (the file, comments too)
     assert load_spec(tmp_path / "edited" / "spec.yaml").limits.joint_torque.max == 40.0
+
+
+def test_a_target_beyond_a_bound_names_the_tasks_that_share_its_scaling(tmp_path: Path) -> None:
+    """A level's tasks share one scaling: a foot pulled into its bound stopped the other feet of
+    its level (8 cm of drift, found from outside), and the warning named only the bounded task."""
+    spec = tmp_path / "shared.yaml"
+    spec.write_text(
+        "version: 1\nname: shared\nrobot: {model: iiwa14}\n"
+        "limits:\n  cartesian:\n    - {frame: tool, axis: z, min: 0.3}\n"
+        "tasks:\n"
+        "  - {name: reach, type: position, frame: tool, axes: [x, z], priority: 1, gains: {kp: 100, kd: 20},\n"
+        "     reference: {position: [0.5, 0.0, 0.1]}}\n"
+        "  - {name: wrist, type: joint, joints: [joint7], priority: 1, gains: {kp: 10, kd: 6}, reference: {q: [0.2]}}\n"
+        "  - {name: posture, type: joint, priority: 2, gains: {kp: 0, kd: 6}}\n")
+    warning = next(d.message for d in validate_file(spec).diagnostics if "outside its bound" in d.message)
+    assert "wrist, at the same priority, share that scaling" in warning and "posture" not in warning
