@@ -154,6 +154,19 @@ def control_law(spec: Spec, problem: ControlProblem, formulation: str) -> Contro
         raise SpecError([spec.source.diagnostic(spec.priority_path(error.priority), str(error))]) from None
 
 
+def sized_law(spec: Spec, problem: ControlProblem, formulation: str,
+              unrolled: ControlLaw | None = None) -> tuple[ControlLaw, bool]:
+    """The formulation's control law, and whether its large products are calls to looped kernels:
+    from LOOPED_PRODUCTS_FROM operations of its unrolled QP data on (counted without CSE, which is
+    what takes the time at these sizes), built again within `looped_products`. `unrolled`: the
+    law already built, if the caller has it."""
+    law = control_law(spec, problem, formulation) if unrolled is None else unrolled
+    if data_function(problem, law, cse=False).n_instructions() < LOOPED_PRODUCTS_FROM:
+        return law, False
+    with looped_products():
+        return control_law(spec, problem, formulation), True
+
+
 class Controller:
     """A spec compiled for one formulation; `step` runs it from Python."""
 
@@ -164,12 +177,7 @@ class Controller:
         if self.formulation not in FORMULATIONS:
             raise ValueError(f"unknown formulation {self.formulation!r}; choose one of {', '.join(FORMULATIONS)}")
         self.problem = build_problem(spec, robot)
-        self.law = control_law(spec, self.problem, self.formulation)
-        # (counted without CSE, which is what takes the time at these sizes)
-        self.looped = data_function(self.problem, self.law, cse=False).n_instructions() >= LOOPED_PRODUCTS_FROM
-        if self.looped:
-            with looped_products():
-                self.law = control_law(spec, self.problem, self.formulation)
+        self.law, self.looped = sized_law(spec, self.problem, self.formulation)
         self.data = data_function(self.problem, self.law)
         self._ref_size = int(self.problem.ref.shape[0])  # (asking the SX each step costs microseconds)
         self._data_buffer: BufferedFunction | None = None
@@ -424,16 +432,18 @@ def compile_check(report: ValidationReport) -> dict[str, dict]:
         except (ValueError, SpecError) as error:
             out[name] = {"ok": False, "error": str(error), "summary": f"cannot compile: {error}"}
             continue
+        law, looped = sized_law(report.spec, problem, name, law)
         operations = data_function(problem, law, cse=False).n_instructions()
         na = 0 if law.qp is None else law.qp.na
         kind = f"QP {law.nx} variables × {na} constraints" if law.nx else "closed form"
-        notes = "; ".join(law.notes)
+        notes = "; ".join(law.notes + (["its large products as calls to looped kernels"] if looped else []))
         out[name] = {
             "ok": True,
             "variables": law.nx,
             "constraints": na,
             "instructions": operations,
             "instructions_counted": "before common-subexpression elimination",
+            "looped_products": looped,
             "notes": law.notes,
             "summary": f"{kind}, {operations} operations for the QP data (before CSE)" + (f" ({notes})" if notes else ""),
         }
