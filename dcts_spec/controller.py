@@ -56,10 +56,10 @@ ACTIVE_TOLERANCE = 1e-9
 # The state is beyond a bound's position or velocity limit if it is by more than this (rad, m,
 # rad/s or m/s): what "a bound crossed" means to the user.
 STATE_TOLERANCE = 1e-5
-# From this many QP-data operations (before common-subexpression elimination) on, the control law's
-# large products are kernel calls (`symbolic.linalg.looped_products`): unrolled, such QP data only
-# compile at -O0 (codegen/flags.py), which makes them slower than the looped code at -O1, and grow
-# like n³ (a serial chain of 32 joints: 215 k operations, 5.6 MB of code; 48 joints: 620 k, refused).
+# From this many QP-data operations on, a control law's large products are kernel calls
+# (`symbolic.linalg.looped_products`): unrolled QP data that large compile only at -O0
+# (codegen.flags.QP_DATA_O0_FROM is this number), slower than the looped code at -O1. Counted
+# before CSE (~5 % above the generated function's count, which the -O level reads).
 LOOPED_PRODUCTS_FROM = 150_000
 DATA_OUTPUTS = ("H", "f", "A", "lba", "uba", "lbx", "ubx", "tau0", "T", "ddq0", "Q", "s0", "S", "p0", "P", "excess")
 
@@ -155,16 +155,16 @@ def control_law(spec: Spec, problem: ControlProblem, formulation: str) -> Contro
 
 
 def sized_law(spec: Spec, problem: ControlProblem, formulation: str,
-              unrolled: ControlLaw | None = None) -> tuple[ControlLaw, bool]:
-    """The formulation's control law, and whether its large products are calls to looped kernels:
-    from LOOPED_PRODUCTS_FROM operations of its unrolled QP data on (counted without CSE, which is
-    what takes the time at these sizes), built again within `looped_products`. `unrolled`: the
-    law already built, if the caller has it."""
+              unrolled: ControlLaw | None = None) -> tuple[ControlLaw, bool, int]:
+    """The formulation's control law (`unrolled`: the one already built), whether its large products
+    are looped (from LOOPED_PRODUCTS_FROM operations), and its QP data's operations before CSE."""
     law = control_law(spec, problem, formulation) if unrolled is None else unrolled
-    if data_function(problem, law, cse=False).n_instructions() < LOOPED_PRODUCTS_FROM:
-        return law, False
+    operations = data_function(problem, law, cse=False).n_instructions()
+    if operations < LOOPED_PRODUCTS_FROM:
+        return law, False, operations
     with looped_products():
-        return control_law(spec, problem, formulation), True
+        law = control_law(spec, problem, formulation)
+    return law, True, data_function(problem, law, cse=False).n_instructions()
 
 
 class Controller:
@@ -177,7 +177,7 @@ class Controller:
         if self.formulation not in FORMULATIONS:
             raise ValueError(f"unknown formulation {self.formulation!r}; choose one of {', '.join(FORMULATIONS)}")
         self.problem = build_problem(spec, robot)
-        self.law, self.looped = sized_law(spec, self.problem, self.formulation)
+        self.law, self.looped, _ = sized_law(spec, self.problem, self.formulation)
         self.data = data_function(self.problem, self.law)
         self._ref_size = int(self.problem.ref.shape[0])  # (asking the SX each step costs microseconds)
         self._data_buffer: BufferedFunction | None = None
@@ -432,8 +432,7 @@ def compile_check(report: ValidationReport) -> dict[str, dict]:
         except (ValueError, SpecError) as error:
             out[name] = {"ok": False, "error": str(error), "summary": f"cannot compile: {error}"}
             continue
-        law, looped = sized_law(report.spec, problem, name, law)
-        operations = data_function(problem, law, cse=False).n_instructions()
+        law, looped, operations = sized_law(report.spec, problem, name, law)
         na = 0 if law.qp is None else law.qp.na
         kind = f"QP {law.nx} variables × {na} constraints" if law.nx else "closed form"
         notes = "; ".join(law.notes + (["its large products as calls to looped kernels"] if looped else []))

@@ -14,8 +14,8 @@ from dcts_spec.controller import build_controller
 from dcts_spec.limits.naming import joint_bound_text
 from dcts_spec.robot.describe import describe
 from dcts_spec.robot.model import JointLimits
-from dcts_spec.sim.runner import prepare_simulation
 from dcts_spec.robot.urdf import build_model, revolute_from_continuous
+from dcts_spec.sim.runner import prepare_simulation
 from dcts_spec.spec import SpecError, load_spec
 from dcts_spec.validate import validate_spec
 
@@ -182,11 +182,15 @@ def test_a_joint_and_a_link_named_alike_are_two_frames_and_the_link_keeps_the_na
     The link keeps the name, the joint's frame is `<name>_fixed_joint`; the spec's task, Cartesian
     bound and push on that name validate and run."""
     path = tmp_path / "roll_arm.urdf"
-    path.write_text(URDF.replace('<joint name="tool_joint"', '<joint name="tool"'))
+    # (and a link already called what the joint's frame would become: that name stays the link's)
+    path.write_text(URDF.replace('<joint name="tool_joint"', '<joint name="tool"').replace(
+        '<link name="tool"/>', '<link name="tool"/>\n  <link name="tool_fixed_joint"/>\n  <joint name="tip" type="fixed">'
+        '<parent link="tool"/><child link="tool_fixed_joint"/></joint>'))
     model = build_model(path)
     names = [frame.name for frame in model.frames]
-    assert names.count("tool") == 1 and "tool_fixed_joint" in names
+    assert names.count("tool") == names.count("tool_fixed_joint") == names.count("tool_fixed_joint_") == 1
     assert model.frames[model.getFrameId("tool")].type == pin.FrameType.BODY
+    assert model.frames[model.getFrameId("tool_fixed_joint")].type == pin.FrameType.BODY
     spec_file = tmp_path / "named_alike.yaml"
     spec_file.write_text(f"""version: 1
 name: named_alike
@@ -205,7 +209,8 @@ scenario:
     - {{type: force, body: tool, force: [0, 0, -5], start: 0.01, duration: 0.02}}
 """)
     spec = load_spec(spec_file)
-    validate_spec(spec)  # (raises SpecError for an error)
+    warnings = [d.message for d in validate_spec(spec).diagnostics if d.severity == "warning"]
+    assert any("the link keeps the name, the other is tool_fixed_joint_" in w for w in warnings), warnings
     result = build_controller(spec).step(np.zeros(3), np.zeros(3), np.zeros(3))
     assert result.status == 0
     log = prepare_simulation(spec, "python").run()

@@ -190,12 +190,10 @@ def unconditional_outputs(text: str) -> str:
 
 
 def calls_without_early_returns(text: str) -> str:
-    """A generated function's calls of other generated functions (looped products' kernels) report
-    a failure in a flag it returns at its end, instead of returning at once: `if (casadi_f1(…))
-    return 1;` becomes `failed |= casadi_f1(…);`. The same result for the wrapper (nonzero: the QP
-    data failed), without a conditional branch to the end of a function of megabytes, beyond what
-    a Thumb-2 conditional branch reaches (±1 MB): arm-none-eabi-gcc -O1 stopped with "conditional
-    branch out of range" on a 32-joint chain's looped QP data."""
+    """`if (casadi_f1(…)) return 1;` (a call of a looped product's kernel) becomes `failed |=
+    casadi_f1(…);`, returned at the end: the same for the wrapper, without a conditional branch
+    across a function of megabytes (Thumb-2's reach ±1 MB: arm-none-eabi-gcc -O1 refused a 32-joint
+    chain's looped QP data)."""
     out: list[str] = []
     start, calls = None, False
     for line in text.splitlines():

@@ -7,6 +7,8 @@ the step checks its inputs and outputs for NaN and Inf, which -ffinite-math-only
 
 from __future__ import annotations
 
+from ..controller import LOOPED_PRODUCTS_FROM
+
 # The controller's own C (the cascade around DAQP, the checks) at -O3: on the bench spec (3,000
 # closed-loop states, five alternating runs) the median step took 3.62 µs against 3.87 µs at -O2
 # (-6.5 %; its loops over rows and variables are unrolled and vectorized; no reassociation, so the
@@ -32,8 +34,9 @@ DAQP_OPTIMIZATION: tuple[str, ...] = ("-O3", "-fassociative-math", "-fno-signed-
 QP_DATA_O1_FROM = 40_000  # QP-data operations from which the QP data are compiled with -O1
 # Larger still, -O1 too takes minutes: the projector baseline's closed form on a 16-joint hand
 # (235 k operations, 5.6 MB of C) took gcc 280 s at -O1, 29 s and 2.9 GB at -O0. dcts's own QP
-# data stay below 100 k operations up to 29 joints.
-QP_DATA_O0_FROM = 150_000
+# data stay below 100 k operations up to 29 joints. From this size on the control law's large
+# products are looped (controller.LOOPED_PRODUCTS_FROM, the same number).
+QP_DATA_O0_FROM = LOOPED_PRODUCTS_FROM
 # No bundle beyond this: gcc needs ~12 kB per operation of one function even at -O0, and the same
 # baseline on a 21-joint human model (~3 M operations, 74 MB of C) ran it out of memory.
 MAX_QP_DATA_OPERATIONS = 500_000

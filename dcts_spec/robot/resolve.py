@@ -21,7 +21,7 @@ from ..spec.types import as_list, size_of
 from ..spec.units import joint_to_si, to_si
 from .builtin import builtin_locked_joints, builtin_urdf_path, lock_joints
 from .model import CartesianBound, JointLimits, Robot, is_prismatic, multi_dof_kind, no_position_range, prismatic_joints
-from .urdf import build_model, mimic_joints
+from .urdf import load_model, mimic_joints
 
 AXIS_INDEX = {"x": 0, "y": 1, "z": 2}
 # A joint moving less inertia than this, relative to the largest joint's (kg·m² or kg), moves
@@ -117,10 +117,13 @@ def _load_model(spec: Spec, diags: list[Diagnostic]) -> tuple[pin.Model | None, 
             return None, path
     try:
         with captured_stderr() as parser_messages:  # (urdfdom prints its complaints itself)
-            full = build_model(path)
+            full, renamed = load_model(path)
     except Exception as exc:  # Pinocchio raises plain RuntimeErrors for bad URDFs
         diags.append(src.diagnostic(where, f"cannot load the URDF {path}: {exc}"))
         return None, path
+    if renamed:  # (a spec's frame of that name is now the link's, which may not be where the joint is)
+        diags.append(src.diagnostic(where, f"the URDF names a link and another frame alike: the link keeps the "
+                                           f"name, the other is {', '.join(renamed)}", "warning"))
     skipped = [line.removeprefix("Error:").strip() for line in parser_messages if line.startswith("Error:")]
     if skipped:  # (urdfdom goes on without an element it cannot parse: a link's inertial read as none)
         diags.append(src.diagnostic(where, f"the URDF parser skipped what it could not read ({'; '.join(skipped)}): "

@@ -62,11 +62,9 @@ def mimic_joints(path: Path) -> dict[str, str]:
 
 
 def unique_frame_names(model: pin.Model) -> list[str]:
-    """Give every frame its own name (in place); returns the new names. A URDF may name a joint
-    and a link alike (B1-Z1's fixed joint and link `gripperStator`), and Pinocchio's lookup by
-    name then raises for either: the link keeps the name, which is what a spec means by a frame
-    (a body), and the other frames of that name get their kind as a suffix
-    (`gripperStator_fixed_joint`), as `dcts describe` lists them."""
+    """Give every frame its own name (in place); returns the new names. A URDF may name a joint and a
+    link alike (B1-Z1's `gripperStator`), and Pinocchio's lookup by name then raises: the link keeps
+    the name, the other frames get their kind as a suffix (`gripperStator_fixed_joint`)."""
     counts = Counter(frame.name for frame in model.frames)
     renamed = []
     for name in [name for name, count in counts.items() if count > 1]:
@@ -74,7 +72,7 @@ def unique_frame_names(model: pin.Model) -> list[str]:
         keep = next((i for i in frames if model.frames[i].type == pin.FrameType.BODY), frames[0])
         for i in frames:
             if i != keep:
-                new = f"{name}_{str(model.frames[i].type).rsplit('.', 1)[-1].lower()}"
+                new = f"{name}_{model.frames[i].type.name.lower()}"
                 while new in counts:
                     new += "_"
                 counts[new] = 1
@@ -83,15 +81,19 @@ def unique_frame_names(model: pin.Model) -> list[str]:
     return renamed
 
 
-def build_model(path: Path) -> pin.Model:
+def load_model(path: Path) -> tuple[pin.Model, list[str]]:
     """Pinocchio's model of the URDF at `path`, its continuous joints made revolute and its frame
-    names unique. Raises what Pinocchio raises for a URDF it cannot read (and ElementTree's
-    ParseError for a file that is no XML)."""
+    names unique, and the frames it renamed (`unique_frame_names`). Raises what Pinocchio raises
+    for a URDF it cannot read (and ElementTree's ParseError for a file that is no XML)."""
     root = ElementTree.parse(path).getroot()
     check_limit_elements(root)
     if not revolute_from_continuous(root):  # (the file as it is: urdfdom's messages name its lines)
         model = pin.buildModelFromUrdf(str(path))
     else:
         model = pin.buildModelFromXML(ElementTree.tostring(root, encoding="unicode"))
-    unique_frame_names(model)
-    return model
+    return model, unique_frame_names(model)
+
+
+def build_model(path: Path) -> pin.Model:
+    """`load_model`'s model."""
+    return load_model(path)[0]

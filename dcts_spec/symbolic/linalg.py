@@ -19,35 +19,26 @@ from contextlib import contextmanager
 from contextvars import ContextVar
 
 import casadi as ca
-import numpy as np
 
 # Looped products (`looped_products`): a product of at least this many structural multiplications
 # goes through a kernel call; smaller ones stay unrolled (a call copies its operands).
 LOOPED_PRODUCT_MIN = 64
 _looped: ContextVar[bool] = ContextVar("looped_products", default=False)
-_kernels: dict[tuple, ca.Function] = {}  # one kernel per (operation, operand sparsities)
+# one kernel per (operation, operand sparsities); a process builds a few dozen at most
+_kernels: dict[tuple, ca.Function] = {}
 
 
 @contextmanager
 def looped_products() -> Iterator[None]:
-    """Within it, `product` and `symmetric_product` of large operands are calls to one kernel per
-    (operation, sparsity pattern): a CasADi MX function that the SX graph calls and does not inline
-    (`never_inline`), which CasADi's code generator emits once, as its sparse `casadi_mtimes`
-    loops. The generated C then grows like the matrices (~n²) instead of like the arithmetic
-    (~n³), and evaluates 1.6–2 × slower than unrolled code at -O1/-O2 (issue 16's measurements,
-    dcts_spec/codegen/README.md): for QP data too large for the compiler to optimize. Same
-    numbers: CasADi sums in the same order either way (bitwise equal outputs, measured)."""
+    """Within it, `product` and `symmetric_product` of large operands are calls to a never-inlined
+    MX kernel, which CasADi's code generator writes once, as its sparse `casadi_mtimes` loops: code
+    that grows like the matrices, not like the arithmetic, and is slower than unrolled code
+    (dcts_spec/codegen/README.md, "Looped products"). The same numbers for finite inputs."""
     token = _looped.set(True)
     try:
         yield
     finally:
         _looped.reset(token)
-
-
-def _multiplications(a: ca.SX, b: ca.SX, lower_only: bool) -> int:
-    """Structural multiplications of aᵀb (lower_only: its lower triangle) or of a b."""
-    pa, pb = np.array(ca.DM(a.sparsity(), 1.0)), np.array(ca.DM(b.sparsity(), 1.0))
-    return int(np.tril(pa.T @ pb).sum()) if lower_only else int((pa @ pb).sum())
 
 
 def _kernel(operation: str, a: ca.Sparsity, b: ca.Sparsity) -> ca.Function:
@@ -64,25 +55,29 @@ def _kernel(operation: str, a: ca.Sparsity, b: ca.Sparsity) -> ca.Function:
     return kernel
 
 
-def _looped_call(operation: str, a: ca.SX, b: ca.SX, pattern: ca.Sparsity) -> ca.SX | None:
-    """The kernel call for a large product of non-constant operands (None: unroll it)."""
+def _looped_call(operation: str, a: ca.SX, b: ca.SX) -> ca.SX | None:
+    """Within `looped_products`, the kernel call for a large product (`mtimes`: a b; `gram`: aᵀb,
+    symmetric) of operands made sparse (a tree's M has exact zeros: not multiplied); None to
+    unroll it."""
     if not _looped.get() or a.is_constant() or b.is_constant():
         return None
-    if _multiplications(a, b, operation == "gram") < LOOPED_PRODUCT_MIN:
+    a, b = ca.sparsify(a), ca.sparsify(b)
+    if operation == "gram" and a.sparsity() != b.sparsity():  # (the kernel's operands share one pattern)
+        union = a.sparsity() + b.sparsity()
+        a, b = ca.project(a, union), ca.project(b, union)
+    left = ca.DM(a.sparsity(), 1.0)
+    counts = ca.mtimes(left.T if operation == "gram" else left, ca.DM(b.sparsity(), 1.0))  # multiplications per entry
+    done = ca.tril(counts) if operation == "gram" else counts
+    if float(ca.sum1(ca.sum2(done))) < LOOPED_PRODUCT_MIN:
         return None
-    # (the result's structural zeros, which the unrolled product would have, kept structural)
-    return ca.project(_kernel(operation, a.sparsity(), b.sparsity())(a, b), pattern)
+    # (the result's structural zeros, which the unrolled product has, kept structural)
+    return ca.project(_kernel(operation, a.sparsity(), b.sparsity())(a, b), counts.sparsity())
 
 
 def product(a: ca.SX, b: ca.SX) -> ca.SX:
     """a b: `ca.mtimes`, or a kernel call for a large product within `looped_products`."""
-    if _looped.get():
-        a, b = ca.sparsify(a), ca.sparsify(b)  # (entries exactly 0, as a tree's M has, not multiplied)
-        pattern = ca.mtimes(ca.DM(a.sparsity(), 1.0), ca.DM(b.sparsity(), 1.0)).sparsity()
-        call = _looped_call("mtimes", a, b, pattern)
-        if call is not None:
-            return call
-    return ca.mtimes(a, b)
+    call = _looped_call("mtimes", a, b)
+    return ca.mtimes(a, b) if call is None else call
 
 
 def _check_square(a: ca.SX, name: str) -> int:
@@ -169,14 +164,9 @@ def symmetric_product(a: ca.SX, b: ca.SX) -> ca.SX:
     n = a.shape[1]
     if b.shape != a.shape:
         raise ValueError(f"a and b must have the same shape, got {a.shape} and {b.shape}")
-    if _looped.get():
-        a, b = ca.sparsify(a), ca.sparsify(b)
-        union = a.sparsity() + b.sparsity()  # (the kernel's operands share one pattern)
-        a, b = ca.project(a, union), ca.project(b, union)
-        pattern = ca.mtimes(ca.DM(union, 1.0).T, ca.DM(union, 1.0)).sparsity()
-        call = _looped_call("gram", a, b, pattern)
-        if call is not None:
-            return call
+    call = _looped_call("gram", a, b)
+    if call is not None:
+        return call
     out = ca.SX(n, n)
     for i in range(n):
         for j in range(i + 1):
