@@ -191,7 +191,8 @@ class Controller:
         self._torque_joints = np.array([j for j, i in enumerate(self.param_layout.torque_index) if i >= 0], dtype=int)
         self._torque_params = np.array([i for i in self.param_layout.torque_index if i >= 0], dtype=int)
         self._last_q: np.ndarray | None = None
-        self._measured_tau_ext = spec.controller.external_torque == "measured"
+        # (else tau_ext is not read: zero, whatever the sensor gives; the C runtime the same)
+        self.reads_tau_ext = spec.controller.external_torque == "measured"
         qp = self.law.qp
         self._structure = None if qp is None else Structure(
             qp.rows_of(BOUNDS), tuple((p.scaling, tuple(p.bend)) for p in qp.priorities), self.law.spare_variables)
@@ -374,7 +375,7 @@ class Controller:
         parameter change one period along its ramp (also a step that falls back)."""
         q, dq, tau_ext, ref = self._inputs(q, dq, tau_ext, ref)
         param = self._ramp.advance()
-        if not self._measured_tau_ext:
+        if not self.reads_tau_ext:
             tau_ext = np.zeros(self.n)  # ignored: zero, whatever the sensor reads (a NaN too)
         if not np.isfinite(np.concatenate((q, dq, tau_ext, ref))).all():
             return self._fallback(q, dq, STATUS_NONFINITE_INPUT, np.zeros(0))

@@ -11,7 +11,7 @@ import pinocchio as pin
 
 from .formulations import build_problem
 from .formulations.hierarchy import OverConstrainedLevel, level_structure
-from .limits.naming import bound_text
+from .limits.naming import bound_text, joint_force_unit
 from .robot.model import Robot
 from .robot.resolve import frame_candidates, resolve_robot
 from .spec import Diagnostic, Spec, SpecError, check_structure, load_spec
@@ -160,7 +160,7 @@ def validate_spec(spec: Spec) -> ValidationReport:
     over = np.flatnonzero(np.abs(gravity) > robot.limits.tau_max)
     if over.size:
         j = over[0]
-        unit = "N" if robot.prismatic[j] else "Nm"  # (a prismatic joint's force)
+        unit = joint_force_unit(robot, int(j))  # (a NumPy integer is no Pinocchio index)
         diags.append(
             spec.source.diagnostic(
                 ("limits", "joint_torque") if spec.limits.joint_torque else ("robot",),

@@ -107,7 +107,7 @@ def test_the_firmware_compiles_the_qp_data_as_the_host_does(sources: Path) -> No
 def test_outputs_are_checked_once_not_at_every_store(sources: Path) -> None:
     """The generated functions check their output pointers at their start (the wrapper passes them
     all): no `if (res[i]!=0)` before each of the thousands of stores (codegen/bundle.py,
-    unconditional_outputs)."""
+    checks_at_the_ends)."""
     text = (sources / "minimal_casadi.c").read_text()
     assert "if (res[" not in text and re.search(r"^  if \(!res\[0\] \|\| !res\[1\].*\) return 1;$", text, re.M)
     assert re.search(r"^  res\[0\]\[0\]=a\d+;$", text, re.M)

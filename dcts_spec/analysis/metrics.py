@@ -65,13 +65,13 @@ import numpy as np
 from ..controller import STATUS_LIMITS_RELAXED
 from ..formulations.parameters import LimitsInForce
 from ..limits.collision import distance_function
-from ..limits.naming import cartesian_row_name, joint_row_name, joint_unit, row_text
+from ..limits.naming import cartesian_row_name, joint_force_unit, joint_row_name, joint_unit, row_text
 from ..robot.collision import CollisionModel
 from ..robot.model import CartesianBound, JointLimits, Robot
 from ..sim.log import SimulationLog
 from ..symbolic import SymbolicRobot
 from .series import TimeSeries
-from .units import joint_force_unit, per, run_units
+from .units import per, run_units
 
 # A torque step between consecutive periods above this fraction of the joint's limit counts as a jump
 # (the continuity check: no jump > 10 % of τ_max between states 1e-4 apart).

@@ -12,9 +12,9 @@ from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
 from ..controller import STATUS_LIMITS_RELAXED
-from ..limits.naming import cartesian_row_name, joint_row_name, joint_unit
+from ..limits.naming import cartesian_row_name, joint_force_unit, joint_row_name, joint_unit
 from .run import RunResult
-from .units import joint_force_unit, per
+from .units import per
 
 LIMIT_COLOR = "#d62728"
 RELAXED_COLOR = "#ff7f0e"

@@ -9,7 +9,7 @@ from __future__ import annotations
 from collections.abc import Iterable, Sequence
 from typing import Any
 
-from ..limits.naming import joint_unit
+from ..limits.naming import joint_force_unit, joint_unit
 from ..robot.model import Robot
 from ..formulations.problem import Level
 from ..tasks import CartesianTask, JointTask, Task
@@ -57,11 +57,6 @@ def per(unit: str, denominator: str) -> str:
 def joints_unit(robot: Robot, joints: Iterable[int] | None = None) -> str:
     """The unit of joint positions: "rad", "m" (prismatic) or "rad, m"."""
     return combine(joint_unit(robot, j) for j in (range(robot.nv) if joints is None else joints))
-
-
-def joint_force_unit(robot: Robot, j: int) -> str:
-    """Joint j's torque unit: Nm, or N for a prismatic joint."""
-    return "Nm" if joint_unit(robot, j) == "rad" else "N"
 
 
 def torque_unit(robot: Robot) -> str:

@@ -5,9 +5,9 @@ from __future__ import annotations
 
 from typing import Any
 
-from ..analysis.units import combine, joint_force_unit, level_units, run_units, task_error_units, torque_unit
+from ..analysis.units import combine, level_units, run_units, task_error_units, torque_unit
 from ..formulations.problem import ControlProblem
-from ..limits.naming import joint_unit
+from ..limits.naming import joint_force_unit, joint_unit
 from ..robot.model import Robot
 from ..spec.errors import KeyPath
 from .document import Campaign

@@ -164,49 +164,38 @@ _GENERATED_FUNCTION = re.compile(r"^static int casadi_f\d+\(const casadi_real\*\
 _CALL_OR_RETURN = re.compile(r"^  if \((casadi_f\d+\(.*\))\) return 1;$")
 
 
-def unconditional_outputs(text: str) -> str:
+def checks_at_the_ends(text: str) -> str:
     """Each generated function checks its output pointers once, at its start (returning 1 if one is
     missing), instead of at every store: `if (res[i]!=0) res[i][j]=a;` becomes `res[i][j]=a;`.
     The wrapper always passes every output. At 28 joints the QP data store 5,300 values, and
     those branches were half of gcc's time at -O1 (27 s → 13 s, peak memory 0.71 → 0.50 GB) and
-    7 % of the QP data's instructions there."""
-    lines = text.splitlines()
+    7 % of the QP data's instructions there.
+
+    And a call of another generated function (a looped product's kernel), `if (casadi_f1(…))
+    return 1;`, becomes `failed |= casadi_f1(…);`, returned at the end: the same for the wrapper,
+    without a conditional branch across a function of megabytes (Thumb-2's reach ±1 MB:
+    arm-none-eabi-gcc -O1 refused a 32-joint chain's looped QP data)."""
     out: list[str] = []
-    start, outputs = None, set()
-    for line in lines:
+    start, outputs, calls = None, set(), False
+    for line in text.splitlines():
         if _GENERATED_FUNCTION.match(line):
-            start, outputs = len(out) + 1, set()
+            start, outputs, calls = len(out) + 1, set(), False
         store = _OUTPUT_STORE.match(line) if start is not None else None
+        call = _CALL_OR_RETURN.match(line) if start is not None else None
         if store:
             outputs.add(int(store.group(1)))
             line = "  " + store.group(2)
-        elif line == "}" and start is not None:
-            if outputs:
-                missing = " || ".join(f"!res[{i}]" for i in sorted(outputs))
-                out.insert(start, f"  if ({missing}) return 1;")
-            start = None
-        out.append(line)
-    return "\n".join(out) + "\n"
-
-
-def calls_without_early_returns(text: str) -> str:
-    """`if (casadi_f1(…)) return 1;` (a call of a looped product's kernel) becomes `failed |=
-    casadi_f1(…);`, returned at the end: the same for the wrapper, without a conditional branch
-    across a function of megabytes (Thumb-2's reach ±1 MB: arm-none-eabi-gcc -O1 refused a 32-joint
-    chain's looped QP data)."""
-    out: list[str] = []
-    start, calls = None, False
-    for line in text.splitlines():
-        if _GENERATED_FUNCTION.match(line):
-            start, calls = len(out) + 1, False
-        call = _CALL_OR_RETURN.match(line) if start is not None else None
-        if call:
+        elif call:
             line, calls = f"  failed |= {call.group(1)};", True
         elif line == "}" and start is not None:
             if calls:
                 if out[-1] != "  return 0;":
                     raise CodegenError("a CasADi-generated function does not end with `return 0;`")
                 out[-1] = "  return failed;"
+            if outputs:
+                missing = " || ".join(f"!res[{i}]" for i in sorted(outputs))
+                out.insert(start, f"  if ({missing}) return 1;")
+            if calls:
                 out.insert(start, "  int failed = 0;")
             start = None
         out.append(line)
@@ -222,11 +211,11 @@ def patch_casadi_source(text: str, min_max_macros: bool = False, header: str | N
     (the prototypes of what it exports), and CasADi's scalar helpers get a prototype each (made
     static instead, the ones the macros below leave unused would be an error under clang). The
     calls of sq and fabs become macros (`_HELPER_CALL`), and fmin and fmax too with `min_max_macros`
-    (`_MIN_MAX_CALL`); the output stores lose their null checks (`unconditional_outputs`), and the
-    calls of other generated functions their early returns (`calls_without_early_returns`). The
+    (`_MIN_MAX_CALL`); the output stores lose their null checks, and the calls of other generated
+    functions their early returns (`checks_at_the_ends`). The
     file is then checked: no heap calls and no mutable static data (only const sparsity patterns
     may be static)."""
-    lines = calls_without_early_returns(unconditional_outputs(text)).splitlines()
+    lines = checks_at_the_ends(text).splitlines()
     out: list[str] = []
     for line in lines:
         if line.startswith("#include <math.h>"):
@@ -549,7 +538,6 @@ def generate_sources(
     nref, levels = controller.ref_size, len(controller.priorities)
     qp = controller.law.qp
     nr = len(controller.bound_names) if qp is not None else 0
-    measured_tau_ext = spec.controller.external_torque == "measured"  # (else the step does not read tau_ext)
     npls = 0 if controller.law.least_squares_task is None else int(controller.law.least_squares_task[0].shape[0])
     priorities = qp.priorities if qp is not None else []
     bends = [p.bend for p in priorities]
@@ -593,7 +581,7 @@ def generate_sources(
     values = {
         "PARAMETERS": parameters_text(controller, big),
         "STATUS_LIST": status_text(name, big, bool(controller.ref_size), nr, not controller.law.enforces_torque_limits,
-                                   measured_tau_ext),
+                                   controller.reads_tau_ext),
         "DDQ_NOTE": "" if controller.law.enforces_torque_limits else " before the torque clip",
         "CONVENTIONS": conventions_text(controller),
         "GAINS": gains_text(controller),
@@ -665,7 +653,7 @@ def generate_sources(
         **{f"SZ_{key.upper()}": value for key, value in work_length.items()},
         "SOLVER_BYTES": solver_bytes,
         "ENFORCES_TORQUE_LIMITS": int(bool(controller.law.enforces_torque_limits)),
-        "MEASURED_TAU_EXT": int(measured_tau_ext),
+        "MEASURED_TAU_EXT": int(controller.reads_tau_ext),
         "TORQUE_TOLERANCE": c_double(TORQUE_TOLERANCE),
         "DAQP_SETTINGS": daqp_settings_code(settings),
         "TAU_MAX_ARRAY": c_array(tau_max),

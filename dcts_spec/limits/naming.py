@@ -44,6 +44,11 @@ def joint_unit(robot: Robot, j: int) -> str:
     return "m" if is_prismatic(robot.model.joints[j + 1]) else "rad"  # (joint 0 is the universe)
 
 
+def joint_force_unit(robot: Robot, j: int) -> str:
+    """Joint j's torque unit: Nm, or N for a prismatic joint."""
+    return "Nm" if joint_unit(robot, j) == "rad" else "N"
+
+
 def joint_row_name(joint: str) -> str:
     """The name of a joint's bound row (limits/joint.py), as logs and summary.json key it."""
     return f"joint:{joint}"
