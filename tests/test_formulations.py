@@ -537,6 +537,31 @@ def test_random_states_give_finite_torques_within_limits(robot, formulation):
             assert bounds.violation() < BOUND_TOL, (st, bounds)
 
 
+@pytest.mark.parametrize("robot", ROBOTS)
+@pytest.mark.parametrize("formulation", ALL_FORMULATIONS)
+def test_looped_products_step_as_the_unrolled_law(robot, formulation, monkeypatch):
+    """The control law with its large products as kernel calls (controller.LOOPED_PRODUCTS_FROM, here
+    forced) steps bit for bit as the unrolled one, on random states under the URDF's limits, fast
+    enough that bounds bind and give way (statuses and scalings are compared too)."""
+    import dcts_spec.controller as controller_module
+
+    key = ("text", spec_text(robot, case_tasks("a", robot), ROBUST_LIMITS, name="robust"))
+    unrolled = controller(key, formulation)
+    monkeypatch.setattr(controller_module, "LOOPED_PRODUCTS_FROM", 0)
+    looped = build_controller(_spec(key), formulation)  # (not `controller`'s cache)
+    assert looped.looped and not unrolled.looped
+    statuses = set()
+    for st in random_states(unrolled.robot.model, 40, 77 + ROBOTS.index(robot), margin=0.05):
+        st.dq *= 4.0  # (up to ~2 rad/s: velocity and position bounds in play)
+        mine, theirs = looped.step(st.q, st.dq, st.tau_ext), unrolled.step(st.q, st.dq, st.tau_ext)
+        assert mine.status == theirs.status, st
+        for a, b in ((mine.tau, theirs.tau), (mine.ddq, theirs.ddq), (mine.scaling, theirs.scaling), (mine.x, theirs.x)):
+            np.testing.assert_array_equal(a, b)
+        statuses.add(mine.status)
+    if formulation in QP_FORMULATIONS:
+        assert STATUS_LIMITS_RELAXED in statuses and STATUS_OK in statuses, statuses
+
+
 @pytest.mark.parametrize("formulation", ALL_FORMULATIONS)
 @pytest.mark.parametrize("bad", ["q_nan", "dq_inf", "tau_ext_nan"])
 def test_non_finite_input_gives_fallback(formulation, bad):
