@@ -903,3 +903,31 @@ def test_the_certificates_least_squares_solves_and_refuses_a_singular_system(row
     assert np.allclose(_cholesky_solve(G.copy(), b.copy()), np.linalg.solve(G, b), rtol=1e-9, atol=1e-12)
     C[-1] = 0.0  # a row DAQP held active that sees no free variable: a zero pivot
     assert _cholesky_solve(C @ C.T, b) is None
+
+
+def test_a_level_met_is_not_left_short_by_the_weighted_qp(monkeypatch):
+    """QP data of a golden state of a 17-joint iCub (its URDF's 100 rad/s velocity limits, a pose
+    task per hand, a least-squares posture): the top level is bent, then met (s = 1). finish_lowest's
+    weighted QP reached s = 1 in Python; in C, warm-started, it stopped 3e-10 short, its check moved,
+    and the scaling stage that followed found s = 1 again, but within the tolerance of the witness,
+    which stood: the two runtimes' answers parted by 1e-4 (q̈). Given such a witness, the stages now
+    take the level met, and the answer is the one the weighted QP gives where it reaches s = 1."""
+    from dcts_spec.solve.lexicographic import Cascade
+
+    args, structure = saved_qp("level_met_short_in_c")
+    acceleration_map = np.load(Path(__file__).parent / "data" / "level_met_short_in_c.npz")["Q"]
+    H, f = args[:2]
+    (s, _), = structure.priorities
+    stages = []
+    finish_lowest = Cascade.finish_lowest
+    monkeypatch.setattr(Cascade, "finish_lowest", lambda self, lbx, ubx, witness=None:
+                        stages.append((self, lbx.copy(), ubx.copy())) or finish_lowest(self, lbx, ubx, witness))
+    x = solve_lexicographic(*args, structure, acceleration_map)
+    cascade, lbx, ubx = stages[-1]  # (the lowest level's stages after the bend)
+    assert x[s] == ubx[s]
+    lo, hi = lbx.copy(), ubx.copy()
+    lo[s] = hi[s] = ubx[s] * (1.0 - 3e-10)
+    short = cascade._solve(H, f, lo, hi)
+    answer = cascade._scale_and_final(lbx, ubx, short, finished=True)
+    assert answer[s] == ubx[s]
+    assert _rel(answer, x) < 1e-12
