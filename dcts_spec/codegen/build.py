@@ -29,7 +29,7 @@ from ..controller import Controller
 from ..robot.model import Robot
 from ..spec import Spec, load_spec
 from ..spec.loader import recorded_bytes
-from .bundle import DAQP_VERSION, GENERATOR, GOLDEN_COUNT, CodegenError, generate_sources
+from .bundle import DAQP_VERSION, GENERATOR, GOLDEN_COUNT, CodegenError, generate_sources, golden_coverage
 from .model import model_record
 from .process import build_timeout as checked_timeout, run, tail
 
@@ -480,7 +480,7 @@ def compile_bundle(
         sources = generate_sources(controller, tmp, spec_bytes=spec_bytes, golden_count=golden_count,
                                    daqp_source=source, model=model)
         manifest = sources.manifest
-        report = BuildReport(out_dir, manifest, build)
+        report = BuildReport(out_dir, manifest, build, notes=golden_coverage(manifest))
         if build:
             manifest["host"], report.cost = build_host(tmp, manifest, cc, build_timeout)
             manifest["built"] = True

@@ -21,8 +21,8 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from ..controller import (ACTIVE_TOLERANCE, DATA_OUTPUTS, STATE_TOLERANCE, STATUS_LIMITS_RELAXED, TORQUE_TOLERANCE,
-                          Controller)
+from ..controller import (ACTIVE_TOLERANCE, DATA_OUTPUTS, STATE_TOLERANCE, STATUS_LIMITS_RELAXED, STATUS_OK,
+                          TORQUE_TOLERANCE, Controller)
 from ..formulations import fallback
 from ..formulations.qp import BOUNDS, HARD
 from ..parameter_ramp import ramp_steps
@@ -38,7 +38,7 @@ from .flags import (C_WARNINGS, DAQP_OPTIMIZATION, HOST_OPTIMIZATION, MAX_QP_DAT
                     flags_text, qp_data_optimization)
 from .model import model_record
 from .spec_copy import copy_spec
-from .states import State, golden_states
+from .states import GOLDEN_PER_STATUS, State, golden_states
 
 GENERATOR = "dcts-spec"
 DAQP_VERSION = "0.11.0"  # the C sources compiled into every bundle; the Python runtime's `daqp` package
@@ -329,6 +329,16 @@ class Golden:
     def determined(self) -> np.ndarray:
         """The vectors compared on everything."""
         return self.compared == COMPARED_ALL
+
+
+def golden_coverage(manifest: dict) -> list[str]:
+    """What the golden vectors leave uncompared: a path of the step ("ok", or "limits relaxed" for
+    a law with bound rows) that fewer than GOLDEN_PER_STATUS of them take (`golden_states`)."""
+    counts = manifest["golden"]["statuses"]
+    paths = [(STATUS_OK, "ok")] + ([(STATUS_LIMITS_RELAXED, "limits relaxed")] if manifest["bound_names"] else [])
+    return [f"only {counts.get(status, 0)} golden vectors end with status {name!r} (wanted {GOLDEN_PER_STATUS}): "
+            f"the golden test compares that path of the C step on few states"
+            for status, name in paths if counts.get(status, 0) < GOLDEN_PER_STATUS]
 
 
 def compute_golden(controller: Controller, states: list[State]) -> Golden:

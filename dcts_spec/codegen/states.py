@@ -14,12 +14,23 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from ..controller import Controller
+from ..controller import STATUS_LIMITS_RELAXED, STATUS_OK, Controller
 from ..tasks.cartesian import CartesianTask
 from ..tasks.joint import JointTask
 
 # Where a joint has no finite bound, sample q within ±π.
 UNBOUNDED_RANGE = np.pi
+CARTESIAN_TRIES = 200  # draws of q for one inside the Cartesian bounds, after which the last stands
+# The golden vectors compare both paths of a step with bound rows: at least this many of their
+# states end "ok" and this many "limits relaxed". Drawn alike for every robot, they did not: a
+# URDF's placeholder velocity limits (iCub's 100 rad/s) made all 122 finite states relaxed, and
+# the iiwa14's made 2 of 122 relaxed.
+GOLDEN_PER_STATUS = 10
+# The regular states' speeds, as a fraction of what StateSampler draws, tried in turn until
+# GOLDEN_PER_STATUS of them are "ok"; after the first, their Cartesian bounds' frames inside them
+# (a random q had an ANYmal's arm beyond its bound in every state). At rest, the last, only
+# gravity and the tasks' errors remain.
+GOLDEN_SPEEDS = (1.0, 0.25, 0.0625, 0.0)
 
 
 @dataclass
@@ -38,9 +49,11 @@ class State:
 class StateSampler:
     """Draws realistic states for one controller."""
 
-    def __init__(self, controller: Controller, seed: int = 0):
+    def __init__(self, controller: Controller, seed: int = 0, speed: float = 1.0, inside: bool = False):
         self.controller = controller
         self.rng = np.random.default_rng(seed)
+        self.speed = speed  # scales the regular velocities (random_dq), not the limit cases' own
+        self.inside = inside  # random states with the Cartesian bounds' frames inside them (`start`)
         robot = controller.robot
         lim = robot.limits
         n = controller.n
@@ -61,7 +74,7 @@ class StateSampler:
         return self.rng.uniform(self.q_lo + margin * span, self.q_hi - margin * span)
 
     def random_dq(self, fraction: float = 0.25) -> np.ndarray:
-        dq = self.rng.normal(0.0, fraction * self.v_max)
+        dq = self.rng.normal(0.0, fraction * self.v_max) * self.speed
         return np.clip(dq, -0.8 * self.v_max, 0.8 * self.v_max)
 
     def random_tau_ext(self, scale: float = 2.0) -> np.ndarray:
@@ -96,6 +109,10 @@ class StateSampler:
 
     def random(self) -> State:
         q = self.random_q()
+        for _ in range(CARTESIAN_TRIES if self.inside else 0):
+            if self.inside_cartesian_bounds(q):
+                break
+            q = self.random_q()
         return State(q, self.random_dq(), self.random_tau_ext(), self.reference(q), "random")
 
     def inside_cartesian_bounds(self, q: np.ndarray) -> bool:
@@ -107,11 +124,11 @@ class StateSampler:
         return all(b.c_min <= b.coordinate(self.data.oMf[self.model.getFrameId(b.frame)].translation) <= b.c_max
                    for b in bounds)
 
-    def start(self, tries: int = 200) -> State:
+    def start(self) -> State:
         """A random state with the Cartesian bounds' frames inside them, where a motion starts (from
-        outside, every step until the robot is back inside is a relaxed one); after `tries`
+        outside, every step until the robot is back inside is a relaxed one); after CARTESIAN_TRIES
         draws, the last."""
-        for _ in range(tries):
+        for _ in range(CARTESIAN_TRIES):
             state = self.random()
             if self.inside_cartesian_bounds(state.q):
                 break
@@ -130,6 +147,26 @@ class StateSampler:
             q[j] = self.q_lo[j] + self.rng.uniform(0.0, 0.03) * span
             dq[j] = -self.rng.uniform(0.3, 0.9) * self.v_max[j]
         return State(q, dq, self.random_tau_ext(), self.reference(q), "near_limit")
+
+    def beyond_limit(self) -> State | None:
+        """A joint already beyond its velocity limit, or its position limit, as after a push: the
+        step cannot hold that bound, and the relaxed solve brings the joint back (None if no joint
+        has a finite limit)."""
+        lim = self.controller.robot.limits
+        q, dq = self.random_q(), self.random_dq(0.1)
+        velocity = np.flatnonzero(np.isfinite(lim.v_max))
+        position = np.flatnonzero(np.isfinite(lim.q_min) & np.isfinite(lim.q_max))
+        if not velocity.size and not position.size:
+            return None
+        side = self.rng.choice([-1.0, 1.0])
+        if position.size and (not velocity.size or self.rng.random() < 0.5):
+            j = int(self.rng.choice(position))
+            span = self.q_hi[j] - self.q_lo[j]
+            q[j] = (self.q_hi[j] if side > 0 else self.q_lo[j]) + side * self.rng.uniform(0.002, 0.02) * span
+        else:
+            j = int(self.rng.choice(velocity))
+            dq[j] = side * self.rng.uniform(1.02, 1.3) * lim.v_max[j]
+        return State(q, dq, self.random_tau_ext(), self.reference(q), "beyond_limit")
 
     def fast(self) -> State:
         """High joint velocities (velocity-limit rows bind)."""
@@ -202,10 +239,40 @@ class StateSampler:
         return State(q, dq, tau_ext, ref, "nonfinite")
 
 
+def statuses(controller: Controller, states: list[State]) -> np.ndarray:
+    """The status of each state's step, each from a fresh controller with the compiled parameters."""
+    out = np.zeros(len(states), dtype=int)
+    for k, s in enumerate(states):
+        controller.reset()
+        controller.reset_params()
+        out[k] = controller.step(s.q, s.dq, s.tau_ext, s.ref if controller.ref_size else None).status
+    controller.reset()
+    return out
+
+
 def golden_states(controller: Controller, count: int = 120, seed: int = 0) -> list[State]:
-    """The golden-vector inputs: regular and limit-active states, with a few non-finite ones."""
-    sampler = StateSampler(controller, seed)
-    states = sampler.mixed(count - 10, limit_fraction=0.2)
+    """The golden-vector inputs: regular and limit-active states, with a few non-finite ones;
+    for a law with bound rows, GOLDEN_PER_STATUS of them "ok" and as many "limits relaxed" where
+    the robot allows (the regular states slowed down, states beyond a limit added)."""
+    for speed in GOLDEN_SPEEDS:
+        sampler = StateSampler(controller, seed, speed, inside=speed < GOLDEN_SPEEDS[0])
+        states = sampler.mixed(count - 10, limit_fraction=0.2)
+        status = statuses(controller, states)
+        if (status == STATUS_OK).sum() >= GOLDEN_PER_STATUS:
+            break
+    if controller.bound_names:
+        missing = GOLDEN_PER_STATUS - int((status == STATUS_LIMITS_RELAXED).sum())
+        beyond: list[State] = []
+        for _ in range(3 * max(missing, 0)):  # (a bound may not be a row of this spec: try a few)
+            if len(beyond) == missing:
+                break
+            state = sampler.beyond_limit()
+            if state is None:
+                break
+            if statuses(controller, [state])[0] == STATUS_LIMITS_RELAXED:
+                beyond.append(state)
+        for k, state in enumerate(beyond):  # (spread over the sequence)
+            states.insert((k + 1) * len(states) // (len(beyond) + 1), state)
     # Deterministic extras: limit cases, and non-finite inputs spread over the sequence (one
     # before any finite q was seen, so the fallback has no last gravity to use).
     extras = [sampler.near_limit(), sampler.near_limit(), sampler.fast(), sampler.heavy_load()]
