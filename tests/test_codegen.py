@@ -1223,6 +1223,27 @@ def test_casadi_helpers_become_macros_with_the_virtual_machines_numbers(tmp_path
 
 # Specs of robots the project had not seen, whose golden test once failed (the C and Python
 # runtimes parted on well-determined vectors); {urdf}: example-robot-data's robots/ folder
+# iCub's two hands' poses above a posture (UNSEEN_ROBOTS; the posture's reference follows)
+ICUB_HANDS_ABOVE_POSTURE = """controller:
+  formulation: dcts
+tasks:
+  - name: l_hand_pose
+    type: pose
+    frame: l_hand
+    priority: 1
+    gains: {{kp: 100, kd: 20}}
+    reference: {{position: [-0.27684, -0.3006, 0.0221046], rpy: [-0.242717, -0.286967, -2.72552]}}
+  - name: r_hand_pose
+    type: pose
+    frame: r_hand
+    priority: 1
+    gains: {{kp: 100, kd: 20}}
+    reference: {{position: [-0.27684, 0.3006, 0.0221034], rpy: [-2.89887, -0.286963, 2.72552]}}
+  - name: posture
+    type: joint
+    priority: 2
+    gains: {{kp: 10, kd: 6}}
+"""
 UNSEEN_ROBOTS = {
     # TIAGo Pro's torso, arms, left gripper and head (23 joints), both tools' poses above a posture:
     # the torque limits cannot hold a dozen joint bounds in 70 of the golden states, and DAQP called
@@ -1255,26 +1276,19 @@ robot:
 limits:
   cartesian:
     - {{frame: l_hand, axis: z, min: 0.0471046}}
-controller:
-  formulation: dcts
-tasks:
-  - name: l_hand_pose
-    type: pose
-    frame: l_hand
-    priority: 1
-    gains: {{kp: 100, kd: 20}}
-    reference: {{position: [-0.27684, -0.3006, 0.0221046], rpy: [-0.242717, -0.286967, -2.72552]}}
-  - name: r_hand_pose
-    type: pose
-    frame: r_hand
-    priority: 1
-    gains: {{kp: 100, kd: 20}}
-    reference: {{position: [-0.27684, 0.3006, 0.0221034], rpy: [-2.89887, -0.286963, 2.72552]}}
-  - name: posture
-    type: joint
-    priority: 2
-    gains: {{kp: 10, kd: 6}}
-    reference: {{q: [0.541054, 0, 0, -0.785397, 1.40325, 0.549779, 0.973022, 0, -0.479963, 0, -0.785397, 1.40325, 0.549779, 0.973022, 0, -0.479963, 0]}}
+""" + ICUB_HANDS_ABOVE_POSTURE + """    reference: {{q: [0.541054, 0, 0, -0.785397, 1.40325, 0.549779, 0.973022, 0, -0.479963, 0, -0.785397, 1.40325, 0.549779, 0.973022, 0, -0.479963, 0]}}
+""",
+    # iCub's 29 joints (legs free, base fixed), the tool poses above a least-squares posture, its
+    # wrists' torques 0.9–1.3 Nm: after a bend the final QP's feasible set is a face DAQP calls
+    # infeasible, and the stage's last iterate was the answer, C and Python 6 Nm apart
+    # (Cascade._on_face)
+    "icub29_tight_wrists": """version: 1
+name: icub29_tight_wrists
+robot:
+  urdf: {urdf}/icub_description/robots/icub_reduced.urdf
+limits:
+  joint_torque: {{max: [168, 168, 80, 60, 48, 22, 168, 168, 80, 60, 48, 22, 72, 160, 160, 168, 168, 68, 40, 0.9, 1.3, 1.3, 168, 168, 68, 40, 0.9, 1.3, 1.3], allow_outside_urdf: true}}
+""" + ICUB_HANDS_ABOVE_POSTURE + """    reference: {{q: [0.767942, -0.890117, 0, -0.890117, -0.183259, 0, 0.767942, -0.890117, 0, -0.890117, -0.183259, 0, 0.541054, 0, 0, -0.785397, 1.40325, 0.549779, 0.973022, 0, -0.479963, 0, -0.785397, 1.40325, 0.549779, 0.973022, 0, -0.479963, 0]}}
 """,
     # four fingers at four priorities: after a bend, rows that see only fixed variables sit at
     # their bounds up to rounding, and DAQP called the final QP infeasible in C (its zero-row
@@ -1365,6 +1379,7 @@ def test_unseen_robots_pass_their_golden_test(name, tmp_path):
     report = compile_bundle(spec, tmp_path / "bundle")  # a failed golden test raises CodegenError
     summary = report.manifest["host"]["test_summary"]
     assert report.manifest["built"] and f"{report.manifest['golden']['count']} golden vectors (" in summary
+    assert not report.notes, report.notes  # (both paths of the step compared: golden_coverage)
 
 
 @EXTENDED

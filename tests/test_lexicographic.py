@@ -931,3 +931,55 @@ def test_a_level_met_is_not_left_short_by_the_weighted_qp(monkeypatch):
     answer = cascade._scale_and_final(lbx, ubx, short, finished=True)
     assert answer[s] == ubx[s]
     assert _rel(answer, x) < 1e-12
+
+
+def test_a_final_qp_daqp_fails_on_a_thin_set_is_solved_on_its_face():
+    """QP data of a golden state of a 29-joint iCub (its legs free on a fixed base, wrist torque
+    limits of 0.9–1.3 Nm): the top level is bent to s = 0, and the rows the least bend holds
+    active (12, of rank 5 in the 17 free variables) leave the final QP a face that DAQP, and HiGHS,
+    call infeasible though the bend's answer lies on it. The stage's last iterate was the answer:
+    1.8 % of x from the least ½xᵀHx + fᵀx, 8 % above it, and C and Python parted by 6 Nm. Now the
+    answer is the minimum on that face, which an independent KKT solve (the face's active rows,
+    an independent set of them by pivoted QR, as equalities) gives, every row holding."""
+    from scipy.linalg import qr
+
+    args, structure = saved_qp("final_qp_on_a_face")
+    acceleration_map = np.load(Path(__file__).parent / "data" / "final_qp_on_a_face.npz")["Q"]
+    H, f, A, lbx, ubx, lba, uba = args
+    x = solve_lexicographic(*args, structure, acceleration_map)
+    value = A @ x
+    assert (np.maximum(lba - value, value - uba) <= 1e-9 * np.maximum(1.0, np.minimum(abs(lba), abs(uba)))).all()
+    levels = structure.levels_above[-1]
+    free = np.setdiff1d(np.arange(x.size), levels)
+    active = np.flatnonzero(np.minimum(abs(value - lba), abs(uba - value)) <= 1e-9 * np.maximum(1.0, abs(value)))
+    _, R, pivots = qr(A[active][:, free].T, pivoting=True)
+    rows = active[pivots[: int(np.sum(np.abs(np.diag(R)) > 1e-6 * abs(R[0, 0])))]]
+    E = A[rows][:, free]
+    kkt = np.block([[H[np.ix_(free, free)], E.T], [E, np.zeros((rows.size, rows.size))]])
+    rhs = np.concatenate([-(f[free] + H[np.ix_(free, levels)] @ x[levels]), value[rows] - A[rows][:, levels] @ x[levels]])
+    least = x.copy()
+    least[free] = np.linalg.solve(kkt, rhs)[: free.size]
+    moved = A @ least
+    assert (np.maximum(lba - moved, moved - uba) <= 1e-9 * np.maximum(1.0, np.minimum(abs(lba), abs(uba)))).all()
+    assert _rel(x, least) < 1e-10
+
+
+def test_a_scaling_a_hair_from_its_bound_is_the_bound():
+    """QP data of a golden state of a 29-joint iCub (its legs free on a fixed base): the top level
+    is bent, then its scaling stage (finish_lowest's weighted QP) stops at s = 2.3e-11, where the
+    C runtime's stopped at 4.3e-11: the least bend leaves no room for s, and where a QP stops
+    within its tolerance of 0 is rounding. The level's task acceleration is large, and the robot's
+    response to it ill-conditioned: the two runtimes' q̈ parted by 1.3e-6 relative. The scaling is
+    now the bound, 0, and the answer the final QP's there, ½xᵀHx + fᵀx with every level fixed."""
+    from dcts_spec.solve.lexicographic import Cascade
+
+    args, structure = saved_qp("scaling_a_hair_above_zero")
+    acceleration_map = np.load(Path(__file__).parent / "data" / "scaling_a_hair_above_zero.npz")["Q"]
+    H, f, A, lbx, ubx, lba, uba = args
+    (s, bend), = structure.priorities
+    x = solve_lexicographic(*args, structure, acceleration_map)
+    assert x[s] == 0.0
+    lo, hi = lbx.copy(), ubx.copy()
+    lo[[s, *bend]] = hi[[s, *bend]] = x[[s, *bend]]
+    final = Cascade(*args, structure)._solve(H, f, lo, hi)
+    assert _rel(x, final) < 1e-12

@@ -641,6 +641,8 @@ def generate_sources(
         "RELAX_MARGIN": c_double(lexicographic.RELAX_MARGIN),
         "SLIVER_WIDENING": c_double(lexicographic.SLIVER_WIDENING),
         "CONSTANT_ROW": c_double(lexicographic.CONSTANT_ROW),
+        "FACE_TOLERANCE": c_double(lexicographic.FACE_TOLERANCE),
+        "INDEPENDENT_ROW": c_double(lexicographic.INDEPENDENT_ROW),
         "FINISH_WEIGHTS": ", ".join(c_double(w) for w in lexicographic.FINISH_WEIGHTS),
         "MAX_STAGE_SOLVES": lexicographic.PROXIMAL_ITERATIONS,
         "VELOCITY_CAP": f"{fallback.VELOCITY_CAP:g}",

@@ -139,6 +139,8 @@ def workspace_fields(nq: int, nref: int, nx: int, na: int, nlevels: int, casadi_
         ("xb", "double", nxa, ""),
         ("witness", "double", nxa, ""),
         ("witness_f", "double", nxa, ""),
+        ("face_lba", "double", n["na"], "a final QP's row bounds, kept while it runs on a face (ctl_on_face)"),
+        ("face_uba", "double", n["na"], ""),
         ("center", "double", nx2, "proximal steps"),
         ("direction", "double", nx2, ""),
         ("trial", "double", nx2, ""),
