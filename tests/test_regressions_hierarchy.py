@@ -34,6 +34,7 @@ from scipy.optimize import linprog
 
 import dcts_spec
 from dcts_spec.robot.builtin import example_robot_data_dir
+from dcts_spec.solve.lexicographic import RELAX_MARGIN
 from dcts_spec.spec import load_spec_text
 from formulation_cases import CAMPAIGN, HOME, joint_acceleration_bounds, spec_text
 
@@ -377,8 +378,11 @@ def test_relaxed_solve_brakes_joint7(direction):
     assert "joint:joint7" in r.relaxed, r.relaxed
     assert a[6] * dq[6] < 0, f"a7 = {a[6]} at q̇7 = {dq[6]}"
     best = _max_braking(c, BENCH_Q, dq, 6, direction)
-    # at least as much braking as the torque limits allow with every other joint's bound holding
-    assert direction * a[6] <= direction * best + 1e-6 * abs(best), f"a7 = {a[6]}, most braking allowed {best}"
+    # at least as much braking as the torque limits allow with every other joint's bound holding,
+    # up to the margin the relaxed bound is widened by (the stages after the relaxation may use it)
+    # and rounding
+    margin = (RELAX_MARGIN + 1e-9) * abs(best)
+    assert direction * a[6] <= direction * best + margin, f"a7 = {a[6]}, most braking allowed {best}"
     assert r.tau[6] == pytest.approx(-direction * TIGHT_J7, abs=1e-6), r.tau
 
 
