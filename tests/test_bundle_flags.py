@@ -16,8 +16,8 @@ from dcts_spec.codegen import bench as bench_module
 from dcts_spec.codegen import compile_bundle
 from dcts_spec.codegen import CodegenError
 from dcts_spec.codegen import bundle as bundle_module
-from dcts_spec.codegen.flags import (C_WARNINGS, DAQP_OPTIMIZATION, HOST_OPTIMIZATION, QP_DATA_O0_FROM, QP_DATA_O1_FROM,
-                                    QP_DATA_OPTIMIZATION, qp_data_optimization)
+from dcts_spec.codegen.flags import (C_WARNINGS, DAQP_OPTIMIZATION, FIRMWARE_CONTROLLER_OPTIMIZATION, HOST_OPTIMIZATION,
+                                    QP_DATA_O0_FROM, QP_DATA_O1_FROM, QP_DATA_OPTIMIZATION, qp_data_optimization)
 
 
 @pytest.fixture(scope="module")
@@ -101,7 +101,76 @@ def test_the_firmware_compiles_the_qp_data_as_the_host_does(sources: Path) -> No
     commands = _compile_commands(sources, "ARM_QP_DATA_OPT=-O0", target="firmware")
     optimization = {source: [w for w in words if w.startswith("-O")][-1] for source, words in commands.items()}
     assert optimization["minimal_casadi.c"] == "-O0"
-    assert optimization["minimal.c"] == optimization["minimal_test.c"] == "-O2"
+    assert optimization["minimal.c"] == FIRMWARE_CONTROLLER_OPTIMIZATION[-1]  # (-Os, for flash)
+    assert optimization["minimal_test.c"] == "-O2"
+
+
+def _firmware_commands(bundle: Path, *variables: str) -> list[list[str]]:
+    done = subprocess.run(["make", "-n", "-B", "firmware", *variables], cwd=bundle, capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    return [shlex.split(line) for line in done.stdout.splitlines() if line.startswith("arm-none-eabi-gcc")]
+
+
+def test_the_firmware_links_daqp_for_plain_qps(sources: Path) -> None:
+    """The Cortex-M7 images take DAQP's branch and bound, hierarchical, AVI, presolve and
+    equality-elimination entry points from firmware/daqp_plain.c (-Wl,--wrap), so that the linker
+    leaves that code out (on the bench spec DAQP's part of the flash went from 58.5 kB to 28.7 kB,
+    the same answers bit for bit). Both images, the one measured and the golden test run on qemu,
+    are linked so; DAQP's own objects are compiled as before (-O2: its fused operations differ at
+    -Os), the controller's at -Os; ARM_DAQP_PLAIN=0 links all of DAQP."""
+    wrapped = bundle_module.daqp_plain_wrapped()
+    assert {"daqp_bnb", "daqp_bnb_prox", "daqp_hiqp", "daqp_solve_avi", "daqp_presolve", "daqp_eq_update",
+            "daqp_eq_wanted"} <= set(wrapped)
+    stub = (sources / "firmware" / "daqp_plain.c").read_text()
+    assert all(f"__wrap_{name}(" in stub for name in wrapped)
+    flag = "-Wl," + ",".join(f"--wrap={name}" for name in wrapped)
+    commands = _firmware_commands(sources)
+    links = {words[words.index("-o") + 1]: words for words in commands if "-c" not in words}
+    assert set(links) == {"firmware/minimal_fw.elf", "firmware/minimal_test.elf"}
+    for words in links.values():
+        assert flag in words and any(w.endswith("/daqp_plain.o") for w in words)
+        assert any(w.endswith("/daqp/bnb.o") for w in words)  # (DAQP's objects as they are: the linker drops the code)
+    compiled = {words[words.index("-c") + 1]: words for words in commands if "-c" in words}
+    assert "firmware/daqp_plain.c" in compiled
+    daqp = [words for source, words in compiled.items() if source.startswith("daqp/src/")]
+    assert daqp and all([w for w in words if w.startswith("-O")][-1] == "-O2" for words in daqp)
+    plain_off = _firmware_commands(sources, "ARM_DAQP_PLAIN=0")
+    assert not any(flag in words or "firmware/daqp_plain.c" in words for words in plain_off)
+    with pytest.raises(CodegenError, match="eq_reduction"):  # (what daqp_plain.c's eq_* rely on)
+        bundle_module.daqp_plain_wrap_flag({"eq_reduction": 0})
+
+
+def test_the_flash_is_broken_down_by_part_from_the_linker_map(tmp_path: Path) -> None:
+    """The image's flash per part (QP data, controller, DAQP, libm, libc, start-up; the rest is the
+    linker's padding), from its map: the input sections kept in the sections loaded from flash, a
+    long section name on a line of its own, the data's initial values (in flash) counted too."""
+    from dcts_spec.codegen.build import flash_breakdown, flash_breakdown_text
+
+    (tmp_path / "m_fw.map").write_text(
+        "Discarded input sections\n\n .text.daqp_bnb 0x00000000 0x200 build/arm-1/daqp/bnb.o\n\n"
+        "Linker script and memory map\n\n"
+        ".text           0x00000000     0x2000\n"
+        " *(.vectors)\n"
+        " .vectors       0x00000000       0x40 build/arm-1/startup.o\n"
+        " .text.m_casadi_f0.constprop.0\n"
+        "                0x00000040      0x800 build/arm-1/m_casadi.o\n"
+        "                0x00000041                m_casadi_f0\n"
+        " .text.m_step   0x00000840      0x100 build/arm-1/m.o\n"
+        " *fill*         0x00000940        0x4 \n"
+        " .text.daqp_ldp 0x00000944      0x300 build/arm-1/daqp/daqp.o\n"
+        " .text.__wrap_daqp_bnb\n"
+        "                0x00000c44        0x4 build/arm-1/daqp_plain.o\n"
+        " .text          0x00000c48       0x80 /usr/lib/arm-none-eabi/lib/thumb/libm.a(lib_a-s_sin.o)\n"
+        " .text          0x00000cc8       0x20 /usr/lib/arm-none-eabi/lib/thumb/libc_nano.a(lib_a-memcpy.o)\n"
+        ".data           0x20000000       0x68 load address 0x00002000\n"
+        " .data          0x20000000       0x68 /usr/lib/arm-none-eabi/lib/thumb/libc_nano.a(lib_a-impure.o)\n"
+        ".bss            0x20000068     0x1000\n"
+        " .bss.ws        0x20000068     0x1000 build/arm-1/fw_main.o\n")
+    parts = flash_breakdown(tmp_path / "m_fw.map", "m", 0xce8 + 0x68)
+    assert parts == {"qp_data": 0x800, "controller": 0x100, "daqp": 0x304, "libm": 0x80, "libc": 0x20 + 0x68,
+                     "startup": 0x40, "other": 4}
+    assert flash_breakdown_text(parts).startswith("QP data 2048, controller 256, DAQP 772, libm 128")
+    assert flash_breakdown(tmp_path / "none.map", "m", 1) is None
 
 
 def test_outputs_are_checked_once_not_at_every_store(sources: Path) -> None:

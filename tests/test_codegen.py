@@ -1135,6 +1135,17 @@ def test_cortex_m7_firmware_and_qemu(three_levels_spec, tmp_path):
     fw = report.firmware
     assert fw["flash_bytes"] > 10000 and fw["ram_bytes"] >= fw["workspace_bytes"] > 0
     assert (tmp_path / "fw" / "firmware" / "three_levels_fw.elf").is_file()
+    # the flash by part (the image's map), and DAQP without the code plain QPs never reach: not in
+    # either image (the golden test on qemu below runs the image's code)
+    parts = fw["flash_breakdown"]
+    assert sum(parts.values()) == fw["flash_bytes"] and 0 <= parts["other"] < 256
+    assert min(parts[k] for k in ("qp_data", "controller", "daqp", "libm", "startup")) > 0
+    assert parts["daqp"] < 35000  # (all of it: ~58 kB)
+    for image in ("three_levels_fw.elf", "three_levels_test.elf"):
+        symbols = subprocess.run(["arm-none-eabi-nm", str(tmp_path / "fw" / "firmware" / image)], capture_output=True,
+                                 text=True, check=True).stdout.split()
+        assert "daqp_ldp" in symbols and "daqp_prox" in symbols
+        assert not {"daqp_bnb", "daqp_hiqp", "daqp_solve_avi", "daqp_presolve", "daqp_eq_update"} & set(symbols)
     assert fw["stack_bytes"]  # read from the ARM build folder
     if shutil.which("qemu-system-arm"):
         assert fw["qemu"].endswith("PASS") and fw["heap_calls"] == 0  # none in init or the steps

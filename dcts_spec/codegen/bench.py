@@ -26,7 +26,8 @@ from ..controller import STATUS_NAMES
 from ..phases import phase
 from ..spec import load_spec
 from ..tasks.cartesian import CartesianTask
-from .build import CACHE_DIR, FirmwareTooLarge, build_firmware, compile_bundle, make_controller, section_size
+from .build import (CACHE_DIR, FirmwareTooLarge, build_firmware, compile_bundle, flash_breakdown_text, make_controller,
+                    section_size)
 from .flags import C_WARNINGS, HOST_OPTIMIZATION, flags_text
 from .process import run, tail
 from .bundle import CodegenError, render, template, version
@@ -378,5 +379,7 @@ def format_report(r: dict) -> str:
                      f"{fw['flash_bytes_at_least']} bytes (target 65536)")
     else:
         lines.append(f"cortex-m7 flash {fw['flash_bytes']} bytes (text+data; target 65536), RAM {fw['ram_bytes']} bytes")
+        if fw.get("flash_breakdown"):  # (the image: start-up, an init-and-step loop and what it links)
+            lines.append(f"  flash by part: {flash_breakdown_text(fw['flash_breakdown'])}")
     return "\n".join(lines)
 

@@ -191,6 +191,8 @@ class BuildReport:
             out.append(f"  cortex-m7      flash {fw['flash_bytes']} bytes (text+data), RAM {fw['ram_bytes']} bytes "
                        f"(data+bss, workspace {fw['workspace_bytes']} included), heap calls "
                        f"{fw.get('heap_calls', '? (no qemu run)')}")
+            if fw.get("flash_breakdown"):
+                out.append(f"                 flash by part: {flash_breakdown_text(fw['flash_breakdown'])}")
             if "stack_bytes" in fw:
                 out.append(f"                 largest stack frames: {fw['stack_bytes']}")
             if fw.get("qemu"):
@@ -363,6 +365,8 @@ def build_firmware(directory: Path, manifest: dict, qemu: bool = True, timeout: 
         "text_bytes": text,
         "data_bytes": data,
         "bss_bytes": bss,
+        # what the flash holds, by where it comes from (the linker's map of the image)
+        "flash_breakdown": flash_breakdown(directory / "firmware" / f"{name}_fw.map", name, text + data),
         "workspace_bytes": _arm_symbol_size(directory / "firmware" / f"{name}_fw.elf", "ws"),
         "stack_bytes": _stack_usage(directory / build_dirs(directory, variables)[1], name),
     }
@@ -403,6 +407,62 @@ def _arm_sections(size_file: Path) -> dict[str, int]:
         elif section == ".bss":
             out["bss"] += size
     return out
+
+
+# The parts of the image's flash (flash_part: which input files each is made of), as reports name them
+FLASH_PARTS = {"qp_data": "QP data", "controller": "controller", "daqp": "DAQP", "libm": "libm",
+               "libc": "libc-nano", "startup": "start-up and main", "other": "padding"}
+FLASH_SECTIONS = (".text", ".ARM.extab", ".ARM.exidx", ".data")  # (.rodata is in .text)
+MAP_INPUT = re.compile(r"^ (\S+)?\s+0x([0-9a-f]+)\s+0x([0-9a-f]+)\s+(\S.*)$")
+
+
+def flash_part(file: str, name: str) -> str:
+    """Which part of the flash an input file of the image's link is (a path from the linker's map)."""
+    base = file.replace("\\", "/").rsplit("/", 1)[-1]
+    if base == f"{name}_casadi.o":
+        return "qp_data"
+    if base == f"{name}.o":
+        return "controller"
+    if "/daqp/" in f"/{file}" or base == "daqp_plain.o":
+        return "daqp"
+    if base.startswith("libm.a(") or base.startswith("libm_nano.a("):
+        return "libm"
+    if ".a(" in base:  # libc_nano, libnosys, libgcc
+        return "libc"
+    if base in ("startup.o", "fw_main.o"):
+        return "startup"
+    return "other"
+
+
+def flash_breakdown(map_file: Path, name: str, flash_bytes: int) -> dict[str, int] | None:
+    """Bytes of the image's flash per part (FLASH_PARTS), from GNU ld's map (-Wl,-Map) of it: the
+    input sections kept in its output sections that are loaded from flash."""
+    if not map_file.is_file():
+        return None
+    parts = dict.fromkeys(FLASH_PARTS, 0)
+    output = None
+    pending = None  # an input section whose name filled its line (its address and size on the next)
+    text = map_file.read_text(errors="replace").split("Linker script and memory map", 1)[-1]
+    for line in text.splitlines():
+        if line and not line[0].isspace():
+            output = line.split()[0]
+            continue
+        match = MAP_INPUT.match(line)
+        if match is None:
+            words = line.split()
+            pending = words[0] if len(words) == 1 and line.startswith(" .") else None
+            continue
+        section = match.group(1) or pending
+        pending = None
+        if output not in FLASH_SECTIONS or section is None or section == "*fill*" or not section.startswith("."):
+            continue
+        parts[flash_part(match.group(4).strip(), name)] += int(match.group(3), 16)
+    parts["other"] += flash_bytes - sum(parts.values())
+    return parts
+
+
+def flash_breakdown_text(parts: dict[str, int]) -> str:
+    return ", ".join(f"{FLASH_PARTS[k]} {v}" for k, v in parts.items())
 
 
 def _arm_symbol_size(elf: Path, symbol: str) -> int | None:

@@ -34,8 +34,8 @@ from .layout import (C_DATA_OUTPUTS, array_lengths, casadi_work_lengths, daqp_st
                      workspace_struct)
 from .datasheet import (conventions_text, fmt_list, gains_text, limits_text, model_texts, parameters_doc_text,
                         parameters_struct, parameters_text, ref_layout_text, sizes_text, status_text, timing_text)
-from .flags import (C_WARNINGS, DAQP_OPTIMIZATION, HOST_OPTIMIZATION, MAX_QP_DATA_OPERATIONS, QP_DATA_O0_FROM, QP_DATA_O1_FROM,
-                    flags_text, qp_data_optimization)
+from .flags import (C_WARNINGS, DAQP_OPTIMIZATION, FIRMWARE_CONTROLLER_OPTIMIZATION, HOST_OPTIMIZATION,
+                    MAX_QP_DATA_OPERATIONS, QP_DATA_O0_FROM, QP_DATA_O1_FROM, flags_text, qp_data_optimization)
 from .model import model_record
 from .spec_copy import copy_spec
 from .states import GOLDEN_PER_STATUS, State, golden_states
@@ -68,6 +68,20 @@ def daqp_settings_code(settings: dict) -> str:
         literal = str(int(value)) if key in DAQP_INT_SETTINGS else c_double(value)
         lines.append(f"    s->{key} = {literal};")
     return "\n".join(lines)
+
+
+def daqp_plain_wrapped() -> list[str]:
+    """DAQP's functions that the firmware images take from firmware/daqp_plain.c (-Wl,--wrap): those
+    the template defines as __wrap_<name>."""
+    return list(dict.fromkeys(re.findall(r"\b__wrap_(daqp_\w+)\(", template("firmware_daqp_plain.c.in"))))
+
+
+def daqp_plain_wrap_flag(settings: dict) -> str:
+    """The link flag of firmware/daqp_plain.c, which holds for DAQP's equality elimination switched off."""
+    if settings.get("eq_reduction") != -1:
+        raise CodegenError("firmware/daqp_plain.c expects DAQP's eq_reduction -1 (off), not "
+                           f"{settings.get('eq_reduction')}")
+    return "-Wl," + ",".join(f"--wrap={name}" for name in daqp_plain_wrapped())
 
 
 def version() -> str:
@@ -676,6 +690,8 @@ def generate_sources(
         "HOST_OPTIMIZATION": flags_text(HOST_OPTIMIZATION),
         "DAQP_OPTIMIZATION": flags_text(DAQP_OPTIMIZATION),
         "DAQP_OPTIMIZATION_CMAKE": ";".join(DAQP_OPTIMIZATION),
+        "FIRMWARE_CONTROLLER_OPTIMIZATION": flags_text(FIRMWARE_CONTROLLER_OPTIMIZATION),
+        "DAQP_PLAIN_WRAP": daqp_plain_wrap_flag(settings),
         "QP_DATA_OPTIMIZATION": flags_text(qp_data_optimization(work["instructions"])),
         "QP_DATA_OPERATIONS": work["instructions"],
         "QP_DATA_O1_FROM": QP_DATA_O1_FROM,
@@ -693,6 +709,7 @@ def generate_sources(
         "firmware/startup.c": render(template("firmware_startup.c.in"), values),
         "firmware/mps2_an500.ld": render(template("firmware_mps2_an500.ld.in"), values),
         "firmware/fw_main.c": render(template("firmware_main.c.in"), values),
+        **({"firmware/daqp_plain.c": render(template("firmware_daqp_plain.c.in"), values)} if nx else {}),
         "README.md": render(template("README.md.in"), values),
         f"{name}.map": f"/* symbols lib{name}.so exports (GNU ld version script) */\n{{\n  global: {name}_*;\n  local: *;\n}};\n",
     }
