@@ -1002,7 +1002,14 @@ def test_two_bundles_in_one_cmake_project(built, tmp_path):
     run("cmake", "--build", "arm", "-j2")
     assert (cell / "arm" / "cell").is_file()
     # position-independent code only where there are shared libraries: not on bare metal
-    assert all("-fPIC" not in e["command"] for e in json.loads((cell / "arm" / "compile_commands.json").read_text()))
+    arm = json.loads((cell / "arm" / "compile_commands.json").read_text())
+    assert all("-fPIC" not in e["command"] for e in arm)
+    # and there built for a small flash, as `make firmware` builds: the controller's C at -Os, DAQP
+    # with firmware/daqp_plain.c (whose -Wl,--wrap the link above resolved, two bundles in one program)
+    for name in ("three_levels", "minimal"):
+        (controller,) = [e["command"].split() for e in arm if e["file"].endswith(f"/{name}/{name}.c")]
+        assert [w for w in controller if w.startswith("-O")][-1] == "-Os"
+        assert any(e["file"].endswith(f"/{name}/firmware/daqp_plain.c") for e in arm)
     assert any("-fPIC" in e["command"] for e in json.loads((cell / "host" / "compile_commands.json").read_text()))
 
 
