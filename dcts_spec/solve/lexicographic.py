@@ -395,12 +395,17 @@ class Cascade:
         if x is None:
             return None
         self._last_qp = qp, multipliers
+        return x if self._holds(x) else None
+
+    def _holds(self, x: np.ndarray) -> bool:
+        """Does x hold the last QP's variable bounds and the rows' bounds as they are now, within
+        FEASIBILITY_TOLERANCE (relative to max(1, |bound|))? On the clipped bounds: the same excess
+        as on the infinite ones (x and Ax are far below 1e30), and no ∞ − ∞ to guard against."""
+        lower, upper = self._lower, self._upper
         value = np.concatenate([x, self.A @ x])
-        # On the clipped bounds: the same excess as on the infinite ones (x and Ax are far below
-        # 1e30), and no ∞ − ∞ to guard against
         excess = np.maximum(lower - value, value - upper)
         excess /= np.maximum(1.0, np.minimum(np.abs(lower), np.abs(upper)))
-        return None if (excess > FEASIBILITY_TOLERANCE).any() else x
+        return not (excess > FEASIBILITY_TOLERANCE).any()
 
     def final(self, upto: int, lbx, ubx) -> np.ndarray | None:
         """½xᵀHx + fᵀx with the levels [0, upto) as they are in lbx/ubx and the others nominal."""
@@ -660,11 +665,7 @@ class Cascade:
         x = self._solve(self.H, self.f, lbx, ubx, feasible=True)
         self.lba, self.uba = lba, uba
         self._set_row_bounds()
-        if x is None:
-            return None
-        value = self.A @ x
-        excess = np.maximum(lba - value, value - uba) / np.maximum(1.0, np.minimum(np.abs(lba), np.abs(uba)))
-        return None if (excess > FEASIBILITY_TOLERANCE).any() else x
+        return None if x is None or not self._holds(x) else x
 
     def levels(self) -> np.ndarray | None:
         """Steps 1–2 of the module docstring on the current bounds."""
