@@ -252,3 +252,25 @@ def approach_speed(distance: float, v_max: float, braking: float, dt: float, upp
         mid = 0.5 * (lo + hi)
         lo, hi = (mid, hi) if bound(mid) > upper else (lo, mid)
     return 0.5 * (lo + hi)
+
+
+# Baxter, both hands at priorities 1 and 2 above a posture (first tried from outside): the top
+# level is scaled in most states ({urdf}: example-robot-data's robots/ folder)
+BAXTER_TWO_HANDS = """version: 1
+name: baxter_two_hands
+robot:
+  urdf: {urdf}/baxter_description/urdf/baxter.urdf
+  locked_joints: {{head_pan: 0, l_gripper_l_finger_joint: 0, l_gripper_r_finger_joint: 0, r_gripper_l_finger_joint: 0, r_gripper_r_finger_joint: 0}}
+limits:
+  joint_acceleration: {{max: 15}}
+  cartesian:
+    - {{frame: left_gripper, axis: z, min: -0.20}}
+    - {{frame: right_gripper, axis: y, max: -0.75}}
+controller:
+  formulation: dcts
+  external_torque: measured
+tasks:
+  - {{name: left_pos, type: position, frame: left_gripper, priority: 1, gains: {{kp: 100, kd: 20}}, reference: {{position: [0.55, 0.75, -0.35]}}}}
+  - {{name: right_pos, type: position, frame: right_gripper, priority: 2, gains: {{kp: 100, kd: 20}}, reference: {{position: [0.55, -0.55, -0.05]}}}}
+  - {{name: posture, type: joint, priority: 3, gains: {{kp: 5, kd: 5}}, reference: {{q: [0.3, -0.5, 0, 1.2, 0, 0.9, 0, -0.3, -0.5, 0, 1.2, 0, 0.9, 0]}}}}
+"""

@@ -41,6 +41,7 @@ from dcts_spec.sim.mismatch import scaled_robot
 from dcts_spec.solve import DAQP_SETTINGS
 from dcts_spec.spec import SpecError, load_spec
 from dcts_spec.validate import validate_spec
+from formulation_cases import BAXTER_TWO_HANDS
 
 ROOT = Path(__file__).resolve().parents[1]
 MINIMAL = ROOT / "specs" / "minimal.yaml"
@@ -1263,6 +1264,10 @@ tasks:
     gains: {{kp: 10, kd: 6}}
 """
 UNSEEN_ROBOTS = {
+    # Baxter's two hands at priorities 1 and 2 above a posture: with the top level scaled, DAQP
+    # called every QP on its optimal face infeasible, and C and Python parted by up to 30 Nm
+    # (Cascade._hold_face); 122 of its 126 golden states hold such a face
+    "baxter_two_hands": BAXTER_TWO_HANDS,
     # TIAGo Pro's torso, arms, left gripper and head (23 joints), both tools' poses above a posture:
     # the torque limits cannot hold a dozen joint bounds in 70 of the golden states, and DAQP called
     # the bend stage on the relaxation's sliver infeasible from a cold start and solved it from C's
@@ -1403,8 +1408,10 @@ def test_unseen_robots_pass_their_golden_test(name, tmp_path):
 @EXTENDED
 def test_a_level_no_free_direction_moves_is_compared_on_its_torques(tmp_path):
     """xArm7 (first tried from outside), four levels whose third (the elbow's height) has no free
-    direction at most states: its variables are arbitrary, so a fifth of the golden vectors have
-    an undetermined QP solution; their torques and accelerations are determined and compared."""
+    direction at most states: its variables can be arbitrary, and a golden vector's QP solution
+    then is undetermined (a fifth of them, 1 of 126 since the rows that certify a scaled level's
+    scaling are held: `Cascade._hold_face`); its torques and accelerations are determined and
+    compared."""
     from dcts_spec.robot.builtin import example_robot_data_dir
 
     spec = tmp_path / "xarm.yaml"
@@ -1428,7 +1435,7 @@ tasks:
 """)
     report = compile_bundle(spec, tmp_path / "bundle")  # a failed golden test raises CodegenError
     golden = report.manifest["golden"]
-    assert len(golden["compared_on_command"]) >= 5, golden
+    assert len(golden["compared_on_command"]) >= 1, golden
     assert f"{len(golden['compared_on_command'])} compared on tau and ddq only" in report.manifest["host"]["test_summary"]
 
 

@@ -30,7 +30,7 @@ from dcts_spec.solve import Structure, solve_lexicographic, unbounded_solution
 from dcts_spec.robot.builtin import example_robot_data_dir
 from dcts_spec.spec import load_spec_text
 from dcts_spec.validate import validate_spec
-from formulation_cases import CAMPAIGN, HOME, TOOL, State, check_bounds, numeric_tasks, spec_text
+from formulation_cases import BAXTER_TWO_HANDS, CAMPAIGN, HOME, TOOL, State, check_bounds, numeric_tasks, spec_text
 from saved_qp import saved_qp
 from lexicographic_reference import (LexicographicSolution, active_set_qp, lexicographic_solution, solve_highs,
                                     task_levels)
@@ -1017,35 +1017,16 @@ def test_an_upper_level_scaled_away_but_for_a_hair_is_scaled_away(monkeypatch):
     assert np.array_equal(solve_lexicographic(*args, structure, acceleration_map), x) and len(solves) == count
 
 
-BAXTER_TWO_HANDS = """version: 1
-name: baxter_two_hands
-robot:
-  urdf: {urdf}/baxter_description/urdf/baxter.urdf
-  locked_joints: {{head_pan: 0, l_gripper_l_finger_joint: 0, l_gripper_r_finger_joint: 0, r_gripper_l_finger_joint: 0, r_gripper_r_finger_joint: 0}}
-limits:
-  joint_acceleration: {{max: 15}}
-  cartesian:
-    - {{frame: left_gripper, axis: z, min: -0.20}}
-    - {{frame: right_gripper, axis: y, max: -0.75}}
-controller:
-  formulation: dcts
-  external_torque: measured
-tasks:
-  - {{name: left_pos, type: position, frame: left_gripper, priority: 1, gains: {{kp: 100, kd: 20}}, reference: {{position: [0.55, 0.75, -0.35]}}}}
-  - {{name: right_pos, type: position, frame: right_gripper, priority: 2, gains: {{kp: 100, kd: 20}}, reference: {{position: [0.55, -0.55, -0.05]}}}}
-  - {{name: posture, type: joint, priority: 3, gains: {{kp: 5, kd: 5}}, reference: {{q: [0.3, -0.5, 0, 1.2, 0, 0.9, 0, -0.3, -0.5, 0, 1.2, 0, 0.9, 0]}}}}
-"""
 
 
-@pytest.mark.xfail(strict=True, reason="known (stop 36, found from outside): after a level is scaled to its largest "
-                   "scaling, DAQP calls the next stages on that optimal face infeasible; not fixed yet")
 def test_a_level_below_a_scaled_one_gets_its_largest_scaling():
     """Baxter, both hands at priorities 1 and 2 above a posture, closed-loop states of a run
     (tests/data/baxter_lower_level_short.json, steps 8, 10, 16, 26): the top level is scaled to
-    0.43–0.51, and the second then is scaled below its largest feasible scaling (0.189 where HiGHS
+    0.43–0.51, and the second then was scaled below its largest feasible scaling (0.189 where HiGHS
     finds 0.1999 on the product's own QP data) or bent where a pure scaling is feasible, status "ok".
-    Every QP with the top level fixed at its largest scaling comes back infeasible from DAQP: the
-    rows that limit that scaling leave a face. Known, open."""
+    Every QP with the top level fixed at its largest scaling came back infeasible from DAQP: the
+    rows that limit that scaling leave a face, which the stages below now get as equalities
+    (`Cascade._hold_face`)."""
     import json
 
     spec = load_spec_text(BAXTER_TWO_HANDS.format(urdf=example_robot_data_dir()))

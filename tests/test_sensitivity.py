@@ -18,14 +18,15 @@ def test_an_answer_its_data_do_not_determine_is_told_from_one_they_do():
     """QP data of a golden state of a 27-joint Alex with hands (5 levels; first tried from
     outside): joint bounds relaxed, then levels bent on the thin feasible sets the relaxation and
     the bends leave. DAQP solves a stage or calls it infeasible depending on the last bits of the
-    data, and changes of 1e-14 relative move the answer by more than its own size. The two states
+    data, and changes of 1e-14 relative move the answer by 8 % of its size (by more than its size
+    before the rows a scaled level's certificate holds active were held: `Cascade._hold_face`). The two states
     this test had before (a G1 with 29 joints, then one with 24) became determined: the first once
     a stage DAQP fails at its step went on at a larger one, the second once a stage DAQP fails
     after a relaxation was tried again with its rows widened. A state where a stage ran long
     (stalled_scale_stage) moves by ~1e-10 at most."""
     args, structure = saved_qp("undetermined_after_relaxation")
     x = solve_lexicographic(*args, structure)
-    assert rounding_spread(*args, structure, x, _identity, samples=12, enough=np.inf)[0] > 0.1
+    assert rounding_spread(*args, structure, x, _identity, samples=12, enough=np.inf)[0] > 0.01
 
     args, structure = saved_qp("stalled_scale_stage")
     x = solve_lexicographic(*args, structure)

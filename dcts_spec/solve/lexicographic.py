@@ -14,8 +14,10 @@ a level therefore means fixing its variables (lb = ub), and the cascade is:
        scale:  max sᵢ with δᵢ fixed (0), the levels below free;
        bend:   only if no sᵢ ∈ [0, 1] is feasible: min ‖δᵢ‖², its split of the task acceleration
                into sᵢ and δᵢ made the one with the least bend (`smallest_bend`), then scale again;
-     then the remaining levels nominal: if feasible, done (for the lowest level, its scaling and
-     this QP are `finish_lowest` again).
+     the level is then fixed, and the rows that certify its scaling is the largest are active in
+     every answer below: they become equalities (`_hold_face`); then the remaining levels
+     nominal: if feasible, done (for the lowest level, its scaling and this QP are
+     `finish_lowest` again).
   3. if even the highest level cannot be bent into feasibility, the torque limits cannot hold the
      joint/Cartesian bounds: `relax` violates them as little as they allow (one slack per
      bound, min Σσ), those bounds are widened to what was achieved, and 1–2 run again.
@@ -278,30 +280,37 @@ def _daqp(H: np.ndarray, f: np.ndarray, qp: FixedEliminated) -> tuple[np.ndarray
 
 def stationary(qp: FixedEliminated, multipliers: np.ndarray, gradient: np.ndarray) -> bool:
     """Does the answer DAQP gave for `qp` minimize a convex φ (its `gradient` ∇φ there, over every
-    variable) on the same set? A certificate, from the rows DAQP holds active (multipliers ≠ 0):
-    ∇φ + Cᵀμ = 0 in the free variables, with each inequality's μ on the side DAQP found it
-    active (λ > 0 upper, λ < 0 lower). μ by least squares on those rows; STATIONARY_TOLERANCE
-    bounds the residual relative to ∇φ. A stage whose iterate passes needs no further QP to
-    confirm it; one that does not goes on as before (the certificate can only be too strict:
-    degenerate active rows, a multiplier DAQP left out)."""
+    variable) on the same set? A stage whose iterate passes needs no further QP to confirm it; one
+    that does not goes on as before (the certificate can only be too strict: degenerate active
+    rows, a multiplier DAQP left out)."""
+    return certificate(qp, multipliers, gradient) is not None
+
+
+def certificate(qp: FixedEliminated, multipliers: np.ndarray, gradient: np.ndarray) -> np.ndarray | None:
+    """The rows of `qp` (its variables' bounds first, as DAQP numbers them) that certify its answer
+    minimizes a convex φ (its `gradient` ∇φ there, over every variable), or None if DAQP's active
+    rows (multipliers ≠ 0) do not: ∇φ + Cᵀμ = 0 in the free variables, with each inequality's μ on
+    the side DAQP found it active (λ > 0 upper, λ < 0 lower). μ by least squares on those rows;
+    STATIONARY_TOLERANCE bounds the residual relative to ∇φ, and a row is in the certificate if
+    its |μ|‖row‖ is above that much of ∇φ. Every minimizer of φ has those rows active
+    (complementary slackness: `Cascade._hold_face`)."""
     g = gradient[qp.free]
     size = math.sqrt(g.dot(g))
     active = multipliers.nonzero()[0]
     if not active.size:
-        return size == 0.0  # (the residual is ∇φ itself)
+        return active if size == 0.0 else None  # (the residual is ∇φ itself)
     if active.size > g.size:  # (dependent rows)
-        return False
+        return None
     C = qp.rows[active]
     mu = _cholesky_solve(C @ C.T, -(C @ g))
     if mu is None:
-        return False
+        return None
     inequality = qp.lower[active] != qp.upper[active]
-    wrong_side = (inequality & (mu * multipliers[active] < 0)
-                  & (np.abs(mu) * qp.row_norms[active] > STATIONARY_TOLERANCE * size))
-    if wrong_side.any():
-        return False
+    significant = np.abs(mu) * qp.row_norms[active] > STATIONARY_TOLERANCE * size
+    if (inequality & (mu * multipliers[active] < 0) & significant).any():  # (on the wrong side)
+        return None
     residual = g + C.T @ mu
-    return math.sqrt(residual.dot(residual)) <= STATIONARY_TOLERANCE * size
+    return active[significant] if math.sqrt(residual.dot(residual)) <= STATIONARY_TOLERANCE * size else None
 
 
 # Up to this many active rows the certificate's Cholesky runs in plain Python, as ctl_stationary
@@ -373,7 +382,9 @@ class Cascade:
         # variables' part by each QP
         self._lower, self._upper = np.empty(lbx.size + lba.size), np.empty(lbx.size + lba.size)
         self._layouts: dict[bytes, tuple] = {}  # FixedEliminated.of's
-        self._last_qp: tuple[FixedEliminated, np.ndarray] | None = None  # the last QP solved, and its multipliers
+        # the last QP, and DAQP's multipliers; None if it failed (or its answer did not hold)
+        self._last_qp: tuple[FixedEliminated, np.ndarray] | None = None
+        self._held = np.zeros(lba.size, dtype=bool)  # the rows `_hold_face` holds at their values
         self._set_row_bounds()
 
     def _set_row_bounds(self) -> None:
@@ -392,10 +403,11 @@ class Cascade:
         if x is None and (feasible or self.relaxed_point is not None):  # (see SLIVER_WIDENING)
             qp = qp.widened(SLIVER_WIDENING)
             x, _, multipliers = daqp_qp(H, f, qp)
-        if x is None:
+        self._last_qp = None
+        if x is None or not self._holds(x):
             return None
         self._last_qp = qp, multipliers
-        return x if self._holds(x) else None
+        return x
 
     def _holds(self, x: np.ndarray) -> bool:
         """Does x hold the last QP's variable bounds and the rows' bounds as they are now, within
@@ -648,20 +660,8 @@ class Cascade:
         lba, uba = self.lba, self.uba
         value = self.A @ np.minimum(np.maximum(point, lbx), ubx)  # (at the fixed variables' values)
         active = np.minimum(np.abs(value - lba), np.abs(uba - value)) <= FACE_TOLERANCE * np.maximum(1.0, np.abs(value))
-        free = lbx != ubx
         self.lba, self.uba = lba.copy(), uba.copy()
-        basis: list[np.ndarray] = []  # orthonormal, of the rows held so far (in the free variables)
-        for i in np.flatnonzero(active):
-            rest = self.A[i, free].copy()
-            for b in basis:
-                rest -= b.dot(rest) * b
-            size = math.sqrt(rest.dot(rest))
-            if size > INDEPENDENT_ROW * math.sqrt(self.A[i].dot(self.A[i])):
-                basis.append(rest / size)
-                self.lba[i] = self.uba[i] = value[i]
-            else:
-                self.lba[i], self.uba[i] = -np.inf, np.inf
-        self._set_row_bounds()
+        self._hold_rows(active, point, lbx, ubx)
         x = self._solve(self.H, self.f, lbx, ubx, feasible=True)
         self.lba, self.uba = lba, uba
         self._set_row_bounds()
@@ -717,6 +717,7 @@ class Cascade:
                 # a 29-joint iCub's top level at s = 0 in Python and 1.6e-15 in C, its bend's split
                 # at 0): scaled away
                 lbx[s] = ubx[s] = self.lbx[s]
+            self._hold_face(i, witness, lbx, ubx)
             if self._nominal_through(i + 1, lbx, ubx):
                 continue  # every level so far nominal: the first QP, which was infeasible
             if i + 2 == count and not self.structure.spare_variables:
@@ -725,6 +726,50 @@ class Cascade:
             if x is not None:
                 return x
         return witness
+
+    def _hold_face(self, level: int, witness: np.ndarray, lbx, ubx) -> None:
+        """After `level`'s scaling stage, its variables now fixed in lbx/ubx: if the stage's last QP
+        (whose answer is the witness) certifies a scaling below its bound (`certificate` of max s), the
+        rows of that certificate are active in every answer with that scaling, and the stages below
+        get them as equalities at their values: with the scaling fixed they are dependent in the
+        free variables and pinch the feasible set to a face of lower dimension, on which DAQP
+        called every QP infeasible (Baxter, a hand's level scaled to 0.43: the level below it was
+        left short, 0.189 where 0.1999 was feasible, or bent where a scaling was, and C and Python
+        parted by up to 30 Nm). The rows held so far are held again in the variables left free
+        (`_hold_rows`): fixing a level can make some of them constant."""
+        s, _ = self.structure.priorities[level]
+        if self._last_qp is None or ubx[s] >= self.ubx[s]:
+            return
+        qp, multipliers = self._last_qp
+        rows = None if s not in qp.free else certificate(qp, multipliers, -np.eye(1, lbx.size, s)[0])
+        if rows is None:
+            return
+        rows = rows[rows >= qp.free.size] - qp.free.size
+        if not rows.size:
+            return
+        self._held[rows] = True
+        self._hold_rows(self._held, witness, lbx, ubx)
+
+    def _hold_rows(self, rows: np.ndarray, point: np.ndarray, lbx, ubx) -> None:
+        """The rows of the mask `rows` as equalities at their values at `point` (within lbx/ubx), but
+        the ones whose coefficients in the free variables are within INDEPENDENT_ROW (relative) of
+        the span of those before them (Gram–Schmidt, in row order): on the face they are constant,
+        and they are dropped (no bounds) and cleared from the mask."""
+        value = self.A @ np.minimum(np.maximum(point, lbx), ubx)  # (at the fixed variables' values)
+        free = lbx != ubx
+        basis: list[np.ndarray] = []  # orthonormal, of the rows held so far (in the free variables)
+        for i in np.flatnonzero(rows):
+            rest = self.A[i, free].copy()
+            for b in basis:
+                rest -= b.dot(rest) * b
+            size = math.sqrt(rest.dot(rest))
+            if len(basis) < rest.size and size > INDEPENDENT_ROW * math.sqrt(self.A[i].dot(self.A[i])):
+                basis.append(rest / size)
+                self.lba[i] = self.uba[i] = value[i]
+            else:
+                rows[i] = False
+                self.lba[i], self.uba[i] = -np.inf, np.inf
+        self._set_row_bounds()
 
     def _admit(self, x: np.ndarray, lbx: np.ndarray, ubx: np.ndarray) -> None:
         """Widen the rows and the variable bounds lbx/ubx that x crosses (by at most the check's
