@@ -97,7 +97,8 @@ class ValidationReport:
         spec, robot, lim = self.spec, self.robot, self.robot.limits
         lines = [
             f"{self.file}: ok — {spec.name}",
-            f"  robot       {robot.name} ({robot.nv} DOF: {', '.join(robot.joint_names)})",
+            f"  robot       {robot.name} ({robot.nv} DOF: {', '.join(robot.joint_names)})"
+            + "".join(f", carrying {p.mass:g} kg at {p.frame}" for p in spec.robot.payloads),
             f"  controller  {spec.controller.formulation}, solver {spec.controller.solver}, "
             f"period {spec.controller.period * 1e3:g} ms, external torque {spec.controller.external_torque}",
         ]

@@ -240,3 +240,47 @@ def test_a_urdf_joint_without_its_limits_is_named(tmp_path, limit, severity, wor
     else:
         messages = [d.message for d in validate_spec(load_spec(spec_file)).diagnostics if d.severity == severity]
         assert any(words in m for m in messages), messages
+
+
+PAYLOAD_SPEC = """version: 1
+name: carrying
+robot:
+  model: iiwa14
+  payloads:
+    - {{frame: {frame}, mass: 2.5, com: [0.01, -0.02, 0.05]}}
+tasks:
+  - {{name: hold, type: position, frame: tool, priority: 1, gains: {{kp: 50, kd: 14}}, reference: {{position: [0.5, 0, 0.5]}}}}
+"""
+
+
+def test_a_payload_the_robot_carries_is_in_the_controllers_model_and_the_plants(tmp_path):
+    """`robot.payloads`: the controller's model is the URDF with the mass as a link of its own at the
+    frame (Pinocchio's own model of that edited file, the reference: mass matrix, inverse dynamics),
+    and the MuJoCo plant carries it too, so the controller is not surprised by it (a 6 kg tool known
+    only through τ_ext, one step late, made a UR10's shoulder oscillate: docs/formulations.md)."""
+    from dcts_spec.robot.builtin import builtin_urdf_path
+    from dcts_spec.sim.mujoco_model import build_mujoco_model
+
+    spec = tmp_path / "carrying.yaml"
+    spec.write_text(PAYLOAD_SPEC.format(frame="tool"))
+    model = validate_spec(load_spec(spec)).robot.model
+    text = builtin_urdf_path("iiwa14").read_text()
+    edited = text.replace("</robot>", """  <link name="payload"><inertial><origin xyz="0.01 -0.02 0.05"/><mass value="2.5"/>
+    <inertia ixx="0" ixy="0" ixz="0" iyy="0" iyz="0" izz="0"/></inertial></link>
+  <joint name="payload_joint" type="fixed"><parent link="tool"/><child link="payload"/></joint>
+</robot>""")
+    reference, plain = pin.buildModelFromXML(edited), pin.buildModelFromXML(text)
+    assert pin.computeTotalMass(model) == pytest.approx(pin.computeTotalMass(plain) + 2.5, abs=1e-12)
+    rng = np.random.default_rng(7)
+    for _ in range(5):
+        q, v, a = rng.uniform(-2, 2, 7), rng.normal(size=7), rng.normal(size=7)
+        ours, theirs = model.createData(), reference.createData()
+        assert np.allclose(pin.crba(model, ours, q), pin.crba(reference, theirs, q), atol=1e-12)
+        assert np.allclose(pin.rnea(model, ours, q, v, a), pin.rnea(reference, theirs, q, v, a), atol=1e-12)
+    plant = build_mujoco_model(model)
+    assert float(plant.body_mass.sum()) == pytest.approx(pin.computeTotalMass(model), abs=1e-9)
+
+    spec.write_text(PAYLOAD_SPEC.format(frame="tol"))
+    with pytest.raises(SpecError) as caught:
+        validate_spec(load_spec(spec))
+    assert f"{spec}:6:" in str(caught.value) and "robot.payloads[0].frame: no link, joint or frame named 'tol'" in str(caught.value)

@@ -22,7 +22,8 @@ from pydantic import AfterValidator, BeforeValidator, Field, WithJsonSchema, mod
 from ..spec.controller import Formulation
 from ..spec.errors import shown
 from ..spec.loader import document_from_data
-from ..spec.scenario import MASS_SCALE, NOISE_STD, PAYLOAD_MASS
+from ..spec.robot import PAYLOAD_MASS
+from ..spec.scenario import MASS_SCALE, NOISE_STD
 from ..spec.source import SourceMap, read_yaml, read_yaml_file
 from ..spec.types import DURATION, TIME, TORQUE, FieldError, Integer, Number, Range, StrictModel
 from ..spec.units import AngleUnit

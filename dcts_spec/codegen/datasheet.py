@@ -110,7 +110,20 @@ def conventions_text(controller: Controller) -> str:
         " *              m; orientations as roll, pitch, yaw in rad, R = Rz(yaw) Ry(pitch) Rx(roll).",
         f" *   Period     {controller.spec.controller.period:g} s: the limits are shaped for it; call the step at this rate.",
         *locked_text(controller),
+        *payload_text(controller),
     ])
+
+
+def payload_text(controller: Controller) -> list[str]:
+    """The Conventions lines on the payloads the model carries (robot.payloads)."""
+    payloads = controller.spec.robot.payloads
+    if not payloads:
+        return []
+    listed = ", ".join(f"{p.mass:g} kg at {p.frame} (centre of mass {fmt_list(p.com)} m in it)" for p in payloads)
+    return textwrap.wrap(f"in the model, and in g(q): {listed}. Without them, or with another load, the "
+                         "difference acts as tau_ext: recompile with the load the robot carries.",
+                         100, initial_indent=" *   Payloads   ", subsequent_indent=" *              ",
+                         break_long_words=False, break_on_hyphens=False)
 
 
 def locked_text(controller: Controller) -> list[str]:

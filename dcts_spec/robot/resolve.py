@@ -41,6 +41,7 @@ def resolve_robot(spec: Spec) -> tuple[Robot, list[Diagnostic]]:
     _check_inertias(spec, model, diags)
     _check_moved_inertia(spec, model, diags)
     _add_frames(spec, model, diags)
+    _add_payloads(spec, model, diags)
     urdf_limits = JointLimits.of_model(model)
     inverted = [f"{model.names[j]} ({lo:.6g} > {hi:.6g})" for j in range(1, model.njoints)
                 for lo, hi in [(model.lowerPositionLimit[model.joints[j].idx_q], model.upperPositionLimit[model.joints[j].idx_q])]
@@ -280,6 +281,21 @@ def _add_frames(spec: Spec, model: pin.Model, diags: list[Diagnostic]) -> None:
         model.addFrame(
             pin.Frame(name, parent.parentJoint, model.getFrameId(frame.parent), placement, pin.FrameType.OP_FRAME)
         )
+
+
+def _add_payloads(spec: Spec, model: pin.Model, diags: list[Diagnostic]) -> None:
+    """`robot.payloads` into the model: each point mass, at its centre of mass in its frame, added
+    to the inertia of the joint that frame moves with. Everything built from the model (the
+    controller's dynamics, the C code, the MuJoCo plant) then carries it."""
+    for k, payload in enumerate(spec.robot.payloads):
+        if not model.existFrame(payload.frame):
+            hint = frame_candidates(payload.frame, [f.name for f in model.frames], spec)
+            diags.append(spec.source.diagnostic(("robot", "payloads", k, "frame"),
+                                                f"no link, joint or frame named {payload.frame!r}{hint}"))
+            continue
+        frame = model.frames[model.getFrameId(payload.frame)]
+        mass = pin.Inertia(float(payload.mass), np.array(payload.com, dtype=float), np.zeros((3, 3)))
+        model.inertias[frame.parentJoint] = model.inertias[frame.parentJoint] + frame.placement.act(mass)
 
 
 def _vector(

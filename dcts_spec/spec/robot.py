@@ -1,4 +1,4 @@
-"""The `robot` section: which robot, extra frames, locked joints."""
+"""The `robot` section: which robot, extra frames, locked joints, payloads it carries."""
 
 from __future__ import annotations
 
@@ -6,11 +6,22 @@ from typing import Annotated, Literal
 
 from pydantic import Field, field_validator, model_validator
 
-from .types import JOINT_VALUE, LENGTH, Number, StrictModel, Vec3
+from .types import JOINT_VALUE, LENGTH, Number, Range, StrictModel, Vec3
 from .units import AngleUnit
 
 
 _NAME_MAX, _PATH_MAX = 255, 4096  # Linux's NAME_MAX and PATH_MAX, the smallest usual limits
+# (also the range a campaign's draws of a scenario payload's mass are held to: campaign/document.py)
+PAYLOAD_MASS = Range(0, 1e4, "kg", open=True)
+
+
+class Payload(StrictModel):
+    """A point mass rigidly attached at a frame: a tool, a gripper, a part held (`robot.payloads`,
+    which the controller models), or one the controller does not know (`scenario.payloads`)."""
+
+    frame: str = Field(description="link or frame the payload is attached to", examples=["tool"])
+    mass: Annotated[Number, PAYLOAD_MASS] = Field(description="mass, kg", examples=[2.0])
+    com: Annotated[Vec3, LENGTH] = Field((0.0, 0.0, 0.0), description="centre of mass in the frame, m", examples=[[0, 0, 0.05]])
 
 
 class FrameSpec(StrictModel):
@@ -37,6 +48,12 @@ class RobotSpec(StrictModel):
         default_factory=dict, description="joints fixed at a value (rad, or m for a prismatic joint), e.g. gripper fingers",
         examples=[{"panda_finger_joint1": 0.02}],
     )
+    payloads: list[Payload] = Field(
+        default_factory=list, description=(
+            "masses the robot carries and the controller models (a tool, a gripper, a part held), each added to "
+            "the link its frame is on; the simulation carries them too. A mass it does not know about is a "
+            "scenario's payload"),
+        examples=[[{"frame": "tool", "mass": 1.2, "com": [0, 0, 0.04]}]])
 
     @field_validator("urdf")
     @classmethod

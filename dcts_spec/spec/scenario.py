@@ -7,6 +7,7 @@ from typing import Annotated, Literal
 from pydantic import Field
 
 from .types import DURATION, JOINT_VALUE, LENGTH, TIME, TORQUE, Integer, Number, NumberList, Range, ScalarOrVector, StrictModel, Vec3
+from .robot import Payload
 from .units import AngleUnit
 
 
@@ -37,18 +38,10 @@ class JointTorqueDisturbance(StrictModel):
 Disturbance = Annotated[ForceDisturbance | JointTorqueDisturbance, Field(discriminator="type")]
 
 
-# Ranges a campaign's draws for these keys are held to as well (campaign/document.py)
-PAYLOAD_MASS = Range(0, 1e4, "kg", open=True)
+# Ranges a campaign's draws for these keys are held to as well (campaign/document.py; a payload's
+# mass: robot.PAYLOAD_MASS)
 NOISE_STD = Range(0, 1e6, "Nm")
 MASS_SCALE = Range(0, 1e3, open=True)
-
-
-class Payload(StrictModel):
-    """A mass the controller does not know about, rigidly attached at a frame (simulation only)."""
-
-    frame: str = Field(description="link or frame the payload is attached to", examples=["tool"])
-    mass: Annotated[Number, PAYLOAD_MASS] = Field(description="mass, kg", examples=[2.0])
-    com: Annotated[Vec3, LENGTH] = Field((0.0, 0.0, 0.0), description="centre of mass in the frame, m", examples=[[0, 0, 0.05]])
 
 
 class Waypoints(StrictModel):
