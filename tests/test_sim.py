@@ -711,4 +711,20 @@ def test_a_payload_the_controller_models_does_not_make_the_loop_oscillate():
         summaries[known] = analyze(sim, log).summary
     assert summaries[False]["torque_jump_steps"] >= 30
     assert summaries[True]["torque_jump_steps"] <= 5 and summaries[True]["max_cartesian_violation"] < 1e-7
-    assert summaries[True]["limits_relaxed"] == 0
+    assert summaries[True]["limits_relaxed"] == 0 and summaries[True]["crossed_after_ok_steps"] == 0
+
+
+def test_a_bound_crossed_after_an_ok_step_is_counted_and_said():
+    """A push the controller cannot foresee (τ_ext is measured one step late) moves the tool further
+    through the floor bound it holds in the step the push starts, a step whose status was "ok": the
+    summary counts such steps (the plant is not the model the status vouched for) and the printed
+    summary says where to look."""
+    from dcts_spec.analysis.report import describe
+    from dcts_spec.robot.builtin import example_robot_data_dir
+
+    push = "  disturbances:\n    - {type: force, body: tool0, force: [0, 0, -100], start: 0.5, duration: 0.1}\n"
+    text = UR10_TOOL_ON_FLOOR.format(urdf=example_robot_data_dir(), robot_payload="", scenario_payload=push)
+    sim, log = simulate(text.replace("duration: 2.5", "duration: 0.6"))
+    run = analyze(sim, log)
+    assert run.summary["crossed_after_ok_steps"] >= 1 and run.summary["crossed_after_ok_first"] == pytest.approx(0.5)
+    assert '"ok" steps left a bound crossed further (the first at t = 0.5 s)' in describe(run)

@@ -16,6 +16,10 @@ applied then, ramps included):
   solved for (its model M_c, its τ_ext input: series.controller_acceleration), the one
   limits.joint_acceleration bounds; joint_acceleration_limits: whether the spec bounds it
   (without, the velocity limits alone allow up to 2 q̇_max/T a step)
+- crossed_after_ok_steps = #{k: status_k = 0 and some joint position, velocity or Cartesian bound's
+  excess at sample k+1 exceeds the one at k by more than CROSSING_TOLERANCE}, crossed_after_ok_first
+  the first such t_k (None if none): where the plant is not the model the status vouched for (an
+  unknown payload, a late τ_ext, a mass mismatch); None as limits_relaxed is
 - solver_failures = #{k: status_k < 0}; limits_relaxed = #{k: status_k = 1}, None for a formulation
   that checks no joint or Cartesian bound (osc, projector: closed forms; run.py, bounds_checked: false),
   whose status is 0 whatever its bounds; relaxed_bounds: for
@@ -76,6 +80,10 @@ from .units import per, run_units
 # A torque step between consecutive periods above this fraction of the joint's limit counts as a jump
 # (the issue's continuity check: no jump > 10 % of τ_max between states 1e-4 apart).
 TORQUE_JUMP_FRACTION = 0.1
+# A bound counts as crossed after an "ok" step when that step left the state further beyond it by
+# more than this, in the bound's own unit (rad, rad/s, m): the status vouches for the controller's
+# model, and the plant did something else (issue 9's check: 1e-5 of the unit)
+CROSSING_TOLERANCE = 1e-5
 
 # The headline metrics: numbers (or per-task numbers) in every summary, finite for a completed run.
 SUMMARY_KEYS = (
@@ -104,6 +112,8 @@ def summarize(log: SimulationLog, series: TimeSeries, robot: Robot, priorities: 
     waypoints = log.waypoint_times
     disturbance = log.tau_ext_true + series.payload_torque
     torque_jump = np.abs(np.diff(log.tau, axis=0))
+    cartesian_excess = _cartesian_excess(series, robot)
+    crossed = _crossed_after_ok(log, (position_excess, velocity_excess, cartesian_excess))
     per_joint = {  # (samples, joints) whose peak is a metric
         "max_joint_position_violation": position_excess,
         "max_joint_velocity_violation": velocity_excess,
@@ -127,7 +137,7 @@ def summarize(log: SimulationLog, series: TimeSeries, robot: Robot, priorities: 
         "max_joint_velocity_violation": peak["max_joint_velocity_violation"],
         "max_joint_velocity_violation_ratio": _peak(ratios["max_joint_velocity_violation_ratio"]),
         "max_torque_violation": peak["max_torque_violation"],
-        "max_cartesian_violation": _cartesian_violation(series, robot),
+        "max_cartesian_violation": _peak(cartesian_excess),
         "max_cartesian_velocity_violation": _peak(np.array([
             _peak(_excess(np.abs(b.coordinate(series.frame_velocities[b.frame])), np.array(b.v_max)))
             for b in robot.cartesian_bounds if np.isfinite(b.v_max)])),
@@ -138,6 +148,8 @@ def summarize(log: SimulationLog, series: TimeSeries, robot: Robot, priorities: 
         "joint_acceleration_limits": bool(np.isfinite(lim.a_max).any()),
         "solver_failures": int(np.count_nonzero(log.status < 0)),
         "limits_relaxed": int(np.count_nonzero(log.status == STATUS_LIMITS_RELAXED)),
+        "crossed_after_ok_steps": int(crossed.size),
+        "crossed_after_ok_first": float(log.time[crossed[0]]) if crossed.size else None,
         "relaxed_bounds": _relaxed_bounds(log, series, robot, collision, position_excess, velocity_excess),
         "min_scaling": _peak(log.scaling, np.min, default=1.0),
         "min_scaling_at": _min_scaling_at(log, series, priorities),
@@ -304,12 +316,23 @@ def _rms_norm(errors: np.ndarray) -> float:
     return float(np.sqrt(np.mean(np.sum(errors**2, axis=1)))) if errors.size else 0.0
 
 
-def _cartesian_violation(series: TimeSeries, robot: Robot) -> float:
-    worst, limits = 0.0, series.limits
-    for i, b in enumerate(robot.cartesian_bounds):
-        c = b.coordinate(series.frame_positions[b.frame])
-        worst = max(worst, _peak(np.maximum(_excess(c, limits.c_max[:, i]), _excess(-c, -limits.c_min[:, i]))))
-    return worst
+def _cartesian_excess(series: TimeSeries, robot: Robot) -> np.ndarray:
+    """(samples, bounds): how far each Cartesian bound's coordinate is outside [c_min, c_max], m."""
+    limits = series.limits
+    columns = [np.maximum(_excess(c, limits.c_max[:, i]), _excess(-c, -limits.c_min[:, i]))
+               for i, b in enumerate(robot.cartesian_bounds)
+               for c in [b.coordinate(series.frame_positions[b.frame])]]
+    return np.stack(columns, axis=1) if columns else np.zeros((len(series.limits.c_min), 0))
+
+
+def _crossed_after_ok(log: SimulationLog, excesses: tuple[np.ndarray, ...]) -> np.ndarray:
+    """The samples k whose step had status 0 and left some bound's excess (samples, bounds) larger
+    at k+1 by more than CROSSING_TOLERANCE."""
+    grew = np.zeros(max(len(log.status) - 1, 0), dtype=bool)
+    for excess in excesses:
+        if excess.size:
+            grew |= (np.diff(excess, axis=0) > CROSSING_TOLERANCE).any(axis=1)
+    return np.flatnonzero(grew & (log.status[:-1] == 0))
 
 
 def json_ready(value: Any) -> Any:

@@ -79,6 +79,10 @@ def describe(run: RunResult) -> str:
                f"joint and Cartesian bounds not checked ({s['formulation']} is a closed form: its torque is clipped, "
                "its bounds are not rows; see the worst excess above)")
     lines.append(f"  solver     {s['solver_failures']} failures, {relaxed}, min scaling {min_scaling_text(s)}")
+    if s.get("crossed_after_ok_steps"):
+        lines.append(f"  model      {s['crossed_after_ok_steps']} \"ok\" steps left a bound crossed further (the first at "
+                     f"t = {s['crossed_after_ok_first']:.4g} s): the plant is not the controller's model (a payload "
+                     "it does not know: robot.payloads; τ_ext one step late; a mass mismatch)")
     for r in s.get("relaxed_bounds", {}).values():
         beyond = f"; beyond {r['beyond']}" if "beyond" in r else ""
         lines.append(f"  relaxed    {r['bound']}: {r['steps']} steps between t = {r['first']:.4g} s and {r['last']:.4g} s"

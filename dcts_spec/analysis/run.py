@@ -75,7 +75,7 @@ def analyze(sim: Simulation, log: SimulationLog, label: str | None = None,
     # so none is "relaxed" (its status is 0 whatever the bounds: a count of 0 read as "held")
     summary["bounds_checked"] = bool(sim.runtime.nx)
     if not summary["bounds_checked"]:
-        summary["limits_relaxed"] = None
+        summary["limits_relaxed"] = summary["crossed_after_ok_steps"] = None
     distances = pair_distances(collision, robot, log.q)
     summary |= collision_metrics(collision, distances, log.time)
     summary["units"] = summary_units(summary, series, robot)

@@ -31,6 +31,8 @@ FIXED_UNITS: dict[str, str] = {
     "torque_jump_steps": "steps",
     "solver_failures": "steps",
     "limits_relaxed": "steps",
+    "crossed_after_ok_steps": "steps",
+    "crossed_after_ok_first": "s",
     "min_scaling": "1",
     "acceleration_energy_integral": "J/s",  # ∫ ½(τ−g)ᵀM⁻¹(τ−g) dt, ½(τ−g)ᵀM⁻¹(τ−g) in J/s²
     "kinetic_energy_peak": "J",
