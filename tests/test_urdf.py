@@ -247,15 +247,16 @@ name: carrying
 robot:
   model: iiwa14
   payloads:
-    - {{frame: {frame}, mass: 2.5, com: [0.01, -0.02, 0.05]}}
+    - {{frame: {frame}, mass: 2.5, com: [0.01, -0.02, 0.05], inertia: [0.004, 0.003, 0.002]}}
 tasks:
   - {{name: hold, type: position, frame: tool, priority: 1, gains: {{kp: 50, kd: 14}}, reference: {{position: [0.5, 0, 0.5]}}}}
 """
 
 
 def test_a_payload_the_robot_carries_is_in_the_controllers_model_and_the_plants(tmp_path):
-    """`robot.payloads`: the controller's model is the URDF with the mass as a link of its own at the
-    frame (Pinocchio's own model of that edited file, the reference: mass matrix, inverse dynamics),
+    """`robot.payloads`: the controller's model is the URDF with the mass (and its inertia) as a link of
+    its own at the frame (Pinocchio's own model of that edited file, the reference: mass matrix,
+    inverse dynamics), moments no rigid body has are a located error,
     and the MuJoCo plant carries it too, so the controller is not surprised by it (a 6 kg tool known
     only through τ_ext, one step late, made a UR10's shoulder oscillate: docs/formulations.md)."""
     from dcts_spec.robot.builtin import builtin_urdf_path
@@ -266,7 +267,7 @@ def test_a_payload_the_robot_carries_is_in_the_controllers_model_and_the_plants(
     model = validate_spec(load_spec(spec)).robot.model
     text = builtin_urdf_path("iiwa14").read_text()
     edited = text.replace("</robot>", """  <link name="payload"><inertial><origin xyz="0.01 -0.02 0.05"/><mass value="2.5"/>
-    <inertia ixx="0" ixy="0" ixz="0" iyy="0" iyz="0" izz="0"/></inertial></link>
+    <inertia ixx="0.004" ixy="0" ixz="0" iyy="0.003" iyz="0" izz="0.002"/></inertial></link>
   <joint name="payload_joint" type="fixed"><parent link="tool"/><child link="payload"/></joint>
 </robot>""")
     reference, plain = pin.buildModelFromXML(edited), pin.buildModelFromXML(text)
@@ -284,3 +285,7 @@ def test_a_payload_the_robot_carries_is_in_the_controllers_model_and_the_plants(
     with pytest.raises(SpecError) as caught:
         validate_spec(load_spec(spec))
     assert f"{spec}:6:" in str(caught.value) and "robot.payloads[0].frame: no link, joint or frame named 'tol'" in str(caught.value)
+    spec.write_text(PAYLOAD_SPEC.format(frame="tool").replace("[0.004, 0.003, 0.002]", "[0.01, 0.003, 0.002]"))
+    with pytest.raises(SpecError) as caught:
+        load_spec(spec)
+    assert f"{spec}:6:" in str(caught.value) and "no rigid body has these principal moments" in str(caught.value)

@@ -284,7 +284,7 @@ def _add_frames(spec: Spec, model: pin.Model, diags: list[Diagnostic]) -> None:
 
 
 def _add_payloads(spec: Spec, model: pin.Model, diags: list[Diagnostic]) -> None:
-    """`robot.payloads` into the model: each point mass, at its centre of mass in its frame, added
+    """`robot.payloads` into the model: each mass, at its centre of mass in its frame, added
     to the inertia of the joint that frame moves with. Everything built from the model (the
     controller's dynamics, the C code, the MuJoCo plant) then carries it."""
     for k, payload in enumerate(spec.robot.payloads):
@@ -294,7 +294,7 @@ def _add_payloads(spec: Spec, model: pin.Model, diags: list[Diagnostic]) -> None
                                                 f"no link, joint or frame named {payload.frame!r}{hint}"))
             continue
         frame = model.frames[model.getFrameId(payload.frame)]
-        mass = pin.Inertia(float(payload.mass), np.array(payload.com, dtype=float), np.zeros((3, 3)))
+        mass = pin.Inertia(float(payload.mass), np.array(payload.com, dtype=float), np.diag(payload.inertia))
         model.inertias[frame.parentJoint] = model.inertias[frame.parentJoint] + frame.placement.act(mass)
 
 

@@ -94,7 +94,7 @@ def resolve_scenario(spec: Spec, robot: Robot) -> Scenario:
         else:
             profiles.append(TorqueProfile(np.array(d.torque, dtype=float), float(d.start),
                                           float(d.start + d.duration), float(d.ramp)))
-    payloads = tuple(Payload(p.frame, float(p.mass), tuple(p.com)) for p in sc.payloads)
+    payloads = tuple(Payload(p.frame, float(p.mass), tuple(p.com), tuple(p.inertia)) for p in sc.payloads)
     return Scenario(
         duration=float(sc.duration),
         period=float(spec.controller.period),

@@ -13,15 +13,31 @@ from .units import AngleUnit
 _NAME_MAX, _PATH_MAX = 255, 4096  # Linux's NAME_MAX and PATH_MAX, the smallest usual limits
 # (also the range a campaign's draws of a scenario payload's mass are held to: campaign/document.py)
 PAYLOAD_MASS = Range(0, 1e4, "kg", open=True)
+PAYLOAD_INERTIA = Range(0, 1e4, "kg·m²")
 
 
 class Payload(StrictModel):
-    """A point mass rigidly attached at a frame: a tool, a gripper, a part held (`robot.payloads`,
-    which the controller models), or one the controller does not know (`scenario.payloads`)."""
+    """A rigid mass attached at a frame: a tool, a gripper, a part held (`robot.payloads`, which the
+    controller models), or one the controller does not know (`scenario.payloads`)."""
 
     frame: str = Field(description="link or frame the payload is attached to", examples=["tool"])
     mass: Annotated[Number, PAYLOAD_MASS] = Field(description="mass, kg", examples=[2.0])
     com: Annotated[Vec3, LENGTH] = Field((0.0, 0.0, 0.0), description="centre of mass in the frame, m", examples=[[0, 0, 0.05]])
+    inertia: tuple[Annotated[Number, PAYLOAD_INERTIA], Annotated[Number, PAYLOAD_INERTIA],
+                   Annotated[Number, PAYLOAD_INERTIA]] = Field(
+        (0.0, 0.0, 0.0), description=("principal moments of inertia about the centre of mass, along the frame's "
+                                      "axes, kg·m² (0: a point mass)"), examples=[[0.004, 0.004, 0.001]])
+
+    @field_validator("inertia")
+    @classmethod
+    def _a_body_can_have_them(cls, moments: tuple[float, float, float]) -> tuple[float, float, float]:
+        """Each moment at most the sum of the other two (the triangle inequality of a rigid body's
+        principal moments: MuJoCo refuses others)."""
+        a, b, c = moments
+        if a > b + c or b > a + c or c > a + b:
+            raise ValueError(f"no rigid body has these principal moments: each must be at most the sum of the "
+                             f"other two, got {list(moments)}")
+        return moments
 
 
 class FrameSpec(StrictModel):
