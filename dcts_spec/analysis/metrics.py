@@ -319,10 +319,11 @@ def _rms_norm(errors: np.ndarray) -> float:
 def _cartesian_excess(series: TimeSeries, robot: Robot) -> np.ndarray:
     """(samples, bounds): how far each Cartesian bound's coordinate is outside [c_min, c_max], m."""
     limits = series.limits
-    columns = [np.maximum(_excess(c, limits.c_max[:, i]), _excess(-c, -limits.c_min[:, i]))
-               for i, b in enumerate(robot.cartesian_bounds)
-               for c in [b.coordinate(series.frame_positions[b.frame])]]
-    return np.stack(columns, axis=1) if columns else np.zeros((len(series.limits.c_min), 0))
+    excess = np.zeros(limits.c_min.shape)
+    for i, b in enumerate(robot.cartesian_bounds):
+        c = b.coordinate(series.frame_positions[b.frame])
+        excess[:, i] = np.maximum(_excess(c, limits.c_max[:, i]), _excess(-c, -limits.c_min[:, i]))
+    return excess
 
 
 def _crossed_after_ok(log: SimulationLog, excesses: tuple[np.ndarray, ...]) -> np.ndarray:

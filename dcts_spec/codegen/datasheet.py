@@ -44,10 +44,11 @@ def columns(rows: list[list[str]], indent: str = " *   ") -> str:
     return "\n".join((indent + "".join(f"{c:<{w}}" for c, w in zip(row, widths))).rstrip() for row in rows)
 
 
-def wrap(text: str, indent: str = " * ", width: int = 100) -> list[str]:
-    """Comment lines of at most `width` characters (words are not broken)."""
-    return textwrap.wrap(text, width, initial_indent=indent, subsequent_indent=indent, break_long_words=False,
-                         break_on_hyphens=False)
+def wrap(text: str, indent: str = " * ", width: int = 100, first: str | None = None) -> list[str]:
+    """Comment lines of at most `width` characters (words are not broken); `first`: the first
+    line's indent (a label), if not `indent`."""
+    return textwrap.wrap(text, width, initial_indent=indent if first is None else first, subsequent_indent=indent,
+                         break_long_words=False, break_on_hyphens=False)
 
 
 def joint_units(controller: Controller) -> list[str]:
@@ -120,10 +121,8 @@ def payload_text(controller: Controller) -> list[str]:
     if not payloads:
         return []
     listed = ", ".join(f"{p.mass:g} kg at {p.frame} (centre of mass {fmt_list(p.com)} m in it)" for p in payloads)
-    return textwrap.wrap(f"in the model, and in g(q): {listed}. Without them, or with another load, the "
-                         "difference acts as tau_ext: recompile with the load the robot carries.",
-                         100, initial_indent=" *   Payloads   ", subsequent_indent=" *              ",
-                         break_long_words=False, break_on_hyphens=False)
+    return wrap(f"in the model, and in g(q): {listed}. Without them, or with another load, the difference acts "
+                "as tau_ext: recompile with the load the robot carries.", " *              ", first=" *   Payloads   ")
 
 
 def locked_text(controller: Controller) -> list[str]:
@@ -132,9 +131,8 @@ def locked_text(controller: Controller) -> list[str]:
     if not locked:
         return []
     listed = ", ".join(f"{name} at {value:g}" for name, value in locked.items())
-    return textwrap.wrap(f"not in q: hold them there yourself (the model has them fixed; rad or m): {listed}.",
-                         100, initial_indent=" *   Locked     ", subsequent_indent=" *              ",
-                         break_long_words=False, break_on_hyphens=False)
+    return wrap(f"not in q: hold them there yourself (the model has them fixed; rad or m): {listed}.",
+                " *              ", first=" *   Locked     ")
 
 
 def sizes_text(controller: Controller, levels: int, nr: int, npls: int, workspace_bytes: int) -> str:
