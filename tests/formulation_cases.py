@@ -15,7 +15,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from dcts_spec.limits.joint import DEFAULT_BRAKING
+from dcts_spec.limits.joint import BRAKING_FLOOR, DEFAULT_BRAKING
 from dcts_spec.limits.viability import acceleration_bounds
 from dcts_spec.spec import Spec, load_spec_text
 from dcts_spec.spec.units import to_si
@@ -156,6 +156,22 @@ def null_space_dimension(levels) -> int:
     return J.shape[1] - np.linalg.matrix_rank(J, 1e-8)
 
 
+def joint_braking(robot, q, dq, j: int) -> tuple[float, float]:
+    """The deceleration joint j's bounds assume (toward its upper bound, toward its lower one): its
+    acceleration limit (DEFAULT_BRAKING without one), or (limits.joint_braking "torque_limited")
+    less where its own torque limit gives less with the other joints still, (τ_max ± h_j) / M_jj
+    with h = ν + g from Pinocchio's RNEA, but not below BRAKING_FLOOR of it."""
+    lim, model = robot.limits, robot.model
+    data = model.createData()
+    nominal = lim.a_max[j] if np.isfinite(lim.a_max[j]) else DEFAULT_BRAKING
+    if not lim.torque_limited_braking:
+        return nominal, nominal
+    inertia = pin.crba(model, data, np.asarray(q, dtype=float))[j, j]
+    h = pin.rnea(model, data, np.asarray(q, dtype=float), np.asarray(dq, dtype=float), np.zeros(model.nv))[j]
+    return tuple(float(min(max((lim.tau_max[j] + sign * h) / inertia, BRAKING_FLOOR * nominal), nominal))
+                 for sign in (1.0, -1.0))
+
+
 def joint_acceleration_bounds(robot, q, dq, dt: float) -> tuple[np.ndarray, np.ndarray]:
     """The shaped bounds on each joint's acceleration (±inf where a joint has no bound)."""
     lim = robot.limits
@@ -163,7 +179,7 @@ def joint_acceleration_bounds(robot, q, dq, dt: float) -> tuple[np.ndarray, np.n
     for j in range(len(q)):
         if not np.isfinite([lim.q_min[j], lim.q_max[j], lim.v_max[j], lim.a_max[j]]).any():
             continue
-        braking = lim.a_max[j] if np.isfinite(lim.a_max[j]) else DEFAULT_BRAKING
+        braking = joint_braking(robot, q, dq, j)
         lo, hi = acceleration_bounds(float(q[j]), float(dq[j]), lim.q_min[j], lim.q_max[j], lim.v_max[j], lim.a_max[j], braking, dt)
         lower[j], upper[j] = float(lo), float(hi)
     return lower, upper

@@ -714,6 +714,78 @@ def test_a_payload_the_controller_models_does_not_make_the_loop_oscillate():
     assert summaries[True]["limits_relaxed"] == 0 and summaries[True]["crossed_after_ok_steps"] == 0
 
 
+UR10_SHOULDER_TOWARD_ITS_LIMIT = """version: 1
+name: ur10_shoulder_toward_its_limit
+robot:
+  urdf: {urdf}/ur_description/urdf/ur10_robot.urdf
+  payloads: [{{frame: tool0, mass: 6.0, com: [0, 0, 0.05]}}]
+limits:
+  joint_position: {{min: [-180, -180, -160, -270, -270, -270], max: [180, 0, 160, 90, 90, 270], unit: deg}}
+  joint_velocity: {{max: [100, 100, 150, 150, 150, 150], unit: deg/s}}
+  joint_acceleration: {{max: 15}}
+  joint_torque: {{max: [330, 330, 150, 54, 54, 54]}}
+  joint_braking: {braking}
+  cartesian:
+    - {{frame: tool0, axis: z, min: 0.30}}
+controller: {{formulation: dcts, external_torque: measured}}
+tasks:
+  - {{name: tool_pos, type: position, frame: tool0, priority: 1, gains: {{kp: 100, kd: 20}}, reference: {{position: [0.75, 0.35, 0.10]}}}}
+  - {{name: tool_point, type: orientation, frame: tool0, axes: [rx, ry], priority: 2, gains: {{kp: 200, kd: 28}}, reference: {{rpy: [180, 0, 0], unit: deg}}}}
+  - {{name: posture, type: joint, priority: 3, gains: {{kp: 10, kd: 6}}, reference: {{q: [0, -1.2, 1.5, -1.9, -1.57, 0]}}}}
+scenario:
+  duration: 0.6
+  initial_q: [1.37, -0.435, 0.433, -1.621, -1.516, 0]
+  initial_dq: [0.288, 1.462, -2.618, -0.04, 1.276, 0]
+"""
+
+
+def test_a_joint_gravity_pulls_toward_its_limit_brakes_as_its_torque_allows_and_stops_inside():
+    """A UR10 with a 6 kg tool swings its shoulder lift up toward its limit (0 rad) at 1.46 rad/s;
+    gravity and the payload pull it that way, and its 330 Nm leave ~6 rad/s² of braking where its
+    acceleration limit says 15. Bounds that count on 15 (`joint_braking: acceleration_limit`, the
+    paper's) start braking too late: the joint crosses its limit by 2 mrad, 117 steps relaxed, the
+    torque jumps 294 Nm. Counting on what the torque gives (the default), it stops inside, no step
+    relaxed."""
+    from dcts_spec.robot.builtin import example_robot_data_dir
+
+    summaries = {}
+    for braking in ("torque_limited", "acceleration_limit"):
+        sim, log = simulate(UR10_SHOULDER_TOWARD_ITS_LIMIT.format(urdf=example_robot_data_dir(), braking=braking))
+        summaries[braking] = analyze(sim, log).summary
+    torque, constant = summaries["torque_limited"], summaries["acceleration_limit"]
+    assert constant["limits_relaxed"] >= 50 and constant["max_joint_position_violation"] > 1e-3
+    assert torque["limits_relaxed"] == 0 and torque["max_joint_position_violation"] < 1e-5
+    assert torque["max_joint_velocity_violation"] < 1e-5 and torque["torque_jump_steps"] <= 3
+
+
+def test_the_braking_the_bounds_assume_is_the_torque_limit_s_in_the_state():
+    """The shoulder lift's upper acceleration bound in the compiled controller equals the one the
+    shaping gives with the braking computed independently (Pinocchio's CRBA and RNEA: (τ_max + h)/M_jj,
+    the other joints still), which is below the acceleration limit in this state; with
+    `joint_braking: acceleration_limit` it is the one with 15 rad/s²."""
+    import casadi as ca
+    from formulation_cases import joint_acceleration_bounds, joint_braking
+
+    from dcts_spec import build_controller
+    from dcts_spec.robot.builtin import example_robot_data_dir
+
+    q = np.array([1.386, -0.064, -0.157, -2.004, -1.001, 0.0])
+    dq = np.array([-0.14, 1.373, -1.958, -2.616, 1.688, 0.0])
+    upper = {}
+    for braking in ("torque_limited", "acceleration_limit"):
+        c = build_controller(load_spec_text(UR10_SHOULDER_TOWARD_ITS_LIMIT.format(urdf=example_robot_data_dir(),
+                                                                                  braking=braking)))
+        p, rows = c.problem, c.problem.acceleration_rows
+        row = rows.names.index(next(name for name in rows.names if "shoulder_lift" in name))
+        compiled = float(ca.Function("upper", [p.sym.q, p.sym.dq, p.param], [rows.upper[row]])(q, dq, c.param_layout.defaults))
+        assert compiled == pytest.approx(joint_acceleration_bounds(c.robot, q, dq, c.problem.period)[1][1], abs=1e-9)
+        upper[braking] = compiled
+        if braking == "torque_limited":
+            toward_max, _ = joint_braking(c.robot, q, dq, 1)
+            assert 3.0 < toward_max < 10.0  # (its torque gives less than the 15 rad/s² limit here)
+    assert upper["torque_limited"] < upper["acceleration_limit"] - 1.0
+
+
 def test_a_bound_crossed_after_an_ok_step_is_counted_and_said():
     """A push the controller cannot foresee (τ_ext is measured one step late) moves the tool further
     through the floor bound it holds in the step the push starts, a step whose status was "ok": the

@@ -277,8 +277,13 @@ def _joint_and_cartesian_text(controller: Controller) -> str:
         rows.append([name, _cell(lim.q_min[j], unit), _cell(lim.q_max[j], unit), _cell(lim.v_max[j], f"{unit}/s"),
                      _cell(lim.a_max[j], f"{unit}/s²"), _cell(controller.tau_max[j], torque)])
     lines.append(columns(rows))
-    if not np.all(np.isfinite(lim.a_max)):
-        lines.append(f" *   |ddq| none: the position and velocity bounds assume braking at {number(DEFAULT_BRAKING)} rad/s² (m/s²).")
+    if how is _QP_ENFORCEMENT:
+        nominal = "|ddq| max" if np.all(np.isfinite(lim.a_max)) else \
+            f"|ddq| max ({number(DEFAULT_BRAKING)} rad/s² or m/s² where none)"
+        torque = (", or at what its own torque limit gives in the state where that is less: (|tau| max ± (nu + g)_j) "
+                  "/ M_jj, the other joints still (a joint gravity pulls toward its bound slows down earlier)"
+                  if lim.torque_limited_braking else " (limits.joint_braking: acceleration_limit)")
+        lines += wrap(f"The position bounds assume a joint brakes at {nominal}{torque}.", indent=" *   ")
     if np.isfinite(lim.a_max).any() and how is _QP_ENFORCEMENT:
         lines += wrap("|ddq| max bounds the command; a joint beyond its compiled position or velocity limit (after "
                       "a push) brakes back harder than that, as its torque limit allows.", indent=" *   ")

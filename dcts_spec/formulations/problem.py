@@ -10,7 +10,7 @@ import numpy as np
 from ..limits.base import AccelerationRows
 from ..limits.cartesian import cartesian_rows
 from ..limits.collision import collision_rows
-from ..limits.joint import joint_rows
+from ..limits.joint import BrakingDynamics, joint_rows
 from ..robot.collision import resolve_collision
 from ..robot.model import Robot
 from ..spec import Spec
@@ -145,11 +145,13 @@ def build_problem(spec: Spec, robot: Robot) -> ControlProblem:
             )
         )
 
-    mass = sym.mass_matrix()
+    mass, coriolis, gravity = sym.mass_matrix(), sym.coriolis(), sym.gravity()
+    limit = torque_limit(params, robot.limits.tau_max)
+    braking = BrakingDynamics(ca.diag(mass), coriolis + gravity, limit)
     period = spec.controller.period
     rows = AccelerationRows.stack(
         [
-            joint_rows(robot.limits, sym.q, sym.dq, period, robot.joint_names, params.joint),
+            joint_rows(robot.limits, sym.q, sym.dq, period, robot.joint_names, params.joint, braking),
             cartesian_rows(robot.cartesian_bounds, sym, period, params.cartesian),
             collision_rows(resolve_collision(spec, robot)[0], sym, period),
         ],
@@ -165,8 +167,8 @@ def build_problem(spec: Spec, robot: Robot) -> ControlProblem:
         ref_layout=layout,
         mass_matrix=mass,
         mass_matrix_inverse=spd_inverse(mass),
-        coriolis=sym.coriolis(),
-        gravity=sym.gravity(),
+        coriolis=coriolis,
+        gravity=gravity,
         external_torque=used_tau_ext,
         levels=levels,
         acceleration_rows=rows,
@@ -175,5 +177,5 @@ def build_problem(spec: Spec, robot: Robot) -> ControlProblem:
         period=period,
         param=params.param,
         param_layout=params.layout,
-        torque_limit=torque_limit(params, robot.limits.tau_max),
+        torque_limit=limit,
     )

@@ -109,23 +109,26 @@ def state_excess(x: Scalar, v: Scalar, x_min: Scalar, x_max: Scalar, v_max: Scal
 
 
 def acceleration_bounds(
-    x: Scalar, v: Scalar, x_min: Scalar, x_max: Scalar, v_max: Scalar, accel_limit: Scalar, braking: Scalar, dt: float,
-    envelope: tuple[float, float, float] | None = None,
+    x: Scalar, v: Scalar, x_min: Scalar, x_max: Scalar, v_max: Scalar, accel_limit: Scalar,
+    braking: Scalar | tuple[Scalar, Scalar], dt: float, envelope: tuple[float, float, float] | None = None,
 ) -> tuple[Bound, Bound]:
     """(lower, upper) bounds on the acceleration of a coordinate for the next control period.
 
     x and v are the state (CasADi expressions or numbers); the limits are numbers, ±inf where
-    there is none, or run-time parameters. `envelope`: the compiled (x_min, x_max, v_max) that
-    run-time parameters narrow (default: the limits themselves). The bounds are clipped to ±_HUGE,
-    so they are finite even without any limit.
+    there is none, or run-time parameters. `braking`: the deceleration the coordinate can count on
+    (> 0), one value or (toward x_max, toward x_min), when it differs with the direction (a joint
+    that gravity pulls one way). `envelope`: the compiled (x_min, x_max, v_max) that run-time
+    parameters narrow (default: the limits themselves). The bounds are clipped to ±_HUGE, so they
+    are finite even without any limit.
     """
     inf = float("inf")
+    braking_down, braking_up = braking if isinstance(braking, tuple) else (braking, braking)
     upper = ca.SX(inf)
     lower = ca.SX(-inf)
     if _limited(x_max):
-        upper = _upper(x, v, x_max, braking, dt)
+        upper = _upper(x, v, x_max, braking_down, dt)
     if _limited(x_min):
-        lower = -_upper(-x, -v, -x_min, braking, dt)  # the mirror image x → −x
+        lower = -_upper(-x, -v, -x_min, braking_up, dt)  # the mirror image x → −x
     if _limited(v_max):
         # The velocity bound comes first: the position terms are clamped into it, so a joint
         # beyond its position bound heads back at the velocity limit, not faster (as min/max
@@ -174,8 +177,8 @@ def acceleration_bounds(
                 beyond_high = ca.logic_or(beyond_high, value > high)
             if _limited(low):
                 beyond_low = ca.logic_or(beyond_low, value < low)
-        upper = ca.if_else(beyond_high, ca.fmax(upper, -braking - give_down), upper)
-        lower = ca.if_else(beyond_low, ca.fmin(lower, braking + give_up), lower)
+        upper = ca.if_else(beyond_high, ca.fmax(upper, -braking_down - give_down), upper)
+        lower = ca.if_else(beyond_low, ca.fmin(lower, braking_up + give_up), lower)
     upper = ca.fmin(ca.fmax(upper, -_HUGE), _HUGE)
     lower = ca.fmin(ca.fmax(lower, -_HUGE), _HUGE)
     middle = 0.5 * (lower + upper)

@@ -336,7 +336,8 @@ def _merge_limits(spec: Spec, urdf: JointLimits, prismatic: np.ndarray, diags: l
     v_max = _symmetric(lim.joint_velocity, "joint_velocity", urdf.v_max, "velocity", "rad/s", prismatic, src, diags)
     a_max = _symmetric(lim.joint_acceleration, "joint_acceleration", urdf.a_max, None, "rad/s²", prismatic, src, diags)
     tau_max = _symmetric(lim.joint_torque, "joint_torque", urdf.tau_max, "effort", "Nm", prismatic, src, diags)
-    return JointLimits(q_min=q_min, q_max=q_max, v_max=v_max, tau_max=tau_max, a_max=a_max)
+    return JointLimits(q_min=q_min, q_max=q_max, v_max=v_max, tau_max=tau_max, a_max=a_max,
+                       torque_limited_braking=lim.joint_braking == "torque_limited")
 
 
 def _symmetric(
