@@ -159,17 +159,38 @@ def null_space_dimension(levels) -> int:
 def joint_braking(robot, q, dq, j: int) -> tuple[float, float]:
     """The deceleration joint j's bounds assume (toward its upper bound, toward its lower one): its
     acceleration limit (DEFAULT_BRAKING without one), or (limits.joint_braking "torque_limited")
-    less where its own torque limit gives less with the other joints still, (τ_max ± h_j) / M_jj
-    with h = ν + g from Pinocchio's RNEA, but not below BRAKING_FLOOR of it."""
+    less where its own torque limit gives less on the way to the bound with the other joints
+    still: (τ_max ∓ (ν_j + ḡ_j)) / M_jj, ν from Pinocchio's RNEA, ḡ_j the mean of the gravity torque
+    over the way, which turning a revolute joint makes g_j cos θ + (∂g_j/∂q_j) sin θ
+    (Pinocchio's gravity derivatives); at least BRAKING_FLOOR of the limit."""
     lim, model = robot.limits, robot.model
     data = model.createData()
     nominal = lim.a_max[j] if np.isfinite(lim.a_max[j]) else DEFAULT_BRAKING
     if not lim.torque_limited_braking:
         return nominal, nominal
-    inertia = pin.crba(model, data, np.asarray(q, dtype=float))[j, j]
-    h = pin.rnea(model, data, np.asarray(q, dtype=float), np.asarray(dq, dtype=float), np.zeros(model.nv))[j]
-    return tuple(float(min(max((lim.tau_max[j] + sign * h) / inertia, BRAKING_FLOOR * nominal), nominal))
-                 for sign in (1.0, -1.0))
+    q, dq = np.asarray(q, dtype=float), np.asarray(dq, dtype=float)
+    inertia = pin.crba(model, data, q)[j, j]
+    gravity = pin.computeGeneralizedGravity(model, data, q)[j]
+    coriolis = pin.rnea(model, data, q, dq, np.zeros(model.nv))[j] - gravity
+    rate = np.diag(pin.computeGeneralizedGravityDerivatives(model, data, q))[j]
+    revolute = model.joints[_joint_of(model, j)].shortname().startswith("JointModelR")
+
+    def mean(g1: float, gap: float) -> float:
+        if not revolute or not np.isfinite(gap):
+            return gravity
+        gap = max(gap, 0.0)
+        if gap <= 1e-4:
+            return gravity + 0.5 * g1 * gap
+        return (gravity * np.sin(gap) + g1 * (1.0 - np.cos(gap))) / gap
+
+    sides = (lim.tau_max[j] + coriolis + mean(rate, lim.q_max[j] - q[j]),
+             lim.tau_max[j] - coriolis - mean(-rate, q[j] - lim.q_min[j]))
+    return tuple(float(min(max(value / inertia, BRAKING_FLOOR * nominal), nominal)) for value in sides)
+
+
+def _joint_of(model, v: int) -> int:
+    """The Pinocchio joint index whose velocity is v."""
+    return next(i for i in range(1, model.njoints) if model.joints[i].idx_v == v)
 
 
 def joint_acceleration_bounds(robot, q, dq, dt: float) -> tuple[np.ndarray, np.ndarray]:

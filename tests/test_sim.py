@@ -786,6 +786,45 @@ def test_the_braking_the_bounds_assume_is_the_torque_limit_s_in_the_state():
     assert upper["torque_limited"] < upper["acceleration_limit"] - 1.0
 
 
+def test_a_joint_gravity_pulls_less_and_less_toward_its_bound_counts_on_the_braking_it_will_have():
+    """Baxter's left shoulder (50 Nm) swinging down at its velocity limit, 1.43 rad from its bound:
+    here gravity pulls it down almost as hard as its torque limit can hold, so braking counted on
+    this state alone (0.09 rad/s²) would call its bound unkeepable, the status "limits relaxed" for
+    ~100 steps of a motion that ends inside it. The gravity torque falls as the arm swings toward hanging:
+    on average over the way it leaves ~6 rad/s² of braking, more than the 0.8 rad/s² that stopping
+    at the bound needs. The bound the controller compiles counts on that mean, and agrees with the
+    independent one (Pinocchio's gravity and its derivative) and with the mean of Pinocchio's
+    gravity sampled along the way."""
+    import casadi as ca
+    from formulation_cases import BAXTER_TWO_HANDS, joint_acceleration_bounds, joint_braking
+
+    from dcts_spec import build_controller
+    from dcts_spec.robot.builtin import example_robot_data_dir
+
+    c = build_controller(load_spec_text(BAXTER_TWO_HANDS.format(urdf=example_robot_data_dir())))
+    q = np.array([0.0539, -0.3809, -0.0616, 1.3171, -0.0621, 0.1136, -0.0663, 0.18, -0.6263, -0.1393, 1.464,
+                  -0.2145, 0.202, -0.2167])
+    dq = np.array([0.6917, 1.5, -1.3594, -0.3287, -1.3766, -1.9554, -1.4094, 1.5, -0.7352, -0.8801, 1.5, -2.251,
+                   0.258, -2.55])
+    j, model, lim = 1, c.robot.model, c.robot.limits
+    data = model.createData()
+    gap = lim.q_max[j] - q[j]
+    way = np.linspace(0.0, gap, 2001)
+    gravity = [pin.computeGeneralizedGravity(model, data, q + s * np.eye(14)[j])[j] for s in way]
+    coriolis = pin.rnea(model, data, q, dq, np.zeros(14))[j] - gravity[0]
+    inertia = pin.crba(model, data, q)[j, j]
+    now = (lim.tau_max[j] + coriolis + gravity[0]) / inertia
+    sampled = (lim.tau_max[j] + coriolis + np.trapezoid(gravity, way) / gap) / inertia
+    toward_max, _ = joint_braking(c.robot, q, dq, j)
+    need = dq[j] ** 2 / (2 * gap)
+    assert now < 0.2 * need and toward_max == pytest.approx(sampled, rel=1e-5) and toward_max > 5 * need
+    p, rows = c.problem, c.problem.acceleration_rows
+    row = rows.names.index(next(name for name in rows.names if name.endswith("left_s1")))
+    compiled = float(ca.Function("upper", [p.sym.q, p.sym.dq, p.param], [rows.upper[row]])(q, dq, c.param_layout.defaults))
+    assert compiled == pytest.approx(joint_acceleration_bounds(c.robot, q, dq, c.problem.period)[1][j], abs=1e-9)
+    assert compiled > -dq[j] / c.problem.period  # (no demand to stop within the step: the state is viable)
+
+
 def test_a_bound_crossed_after_an_ok_step_is_counted_and_said():
     """A push the controller cannot foresee (τ_ext is measured one step late) moves the tool further
     through the floor bound it holds in the step the push starts, a step whose status was "ok": the

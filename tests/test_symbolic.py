@@ -106,6 +106,7 @@ def _reference(model: pin.Model, frames: list[str], q: np.ndarray, dq: np.ndarra
     out["M"] = np.triu(mass) + np.triu(mass, 1).T  # crba fills the upper triangle only
     out["Minv"] = np.triu(minv := pin.computeMinverse(model, data, q)) + np.triu(minv, 1).T
     out["g"] = pin.computeGeneralizedGravity(model, data, q).reshape(-1, 1)
+    out["dg"] = np.diag(pin.computeGeneralizedGravityDerivatives(model, data, q)).reshape(-1, 1).copy()
     out["nu"] = pin.rnea(model, data, q, dq, np.zeros(model.nv)).reshape(-1, 1) - out["g"]
     out["tau"] = pin.rnea(model, data, q, dq, ddq).reshape(-1, 1)
     return out
@@ -129,6 +130,7 @@ def evaluated(request: pytest.FixtureRequest) -> tuple[str, dict[str, tuple[np.n
         "Minv": spd_inverse(sym.mass_matrix()),
         "nu": sym.coriolis(),
         "g": sym.gravity(),
+        "dg": sym.gravity_rate(),
         "tau": sym.inverse_dynamics(ddq),
     }
     fun = ca.Function("all", [sym.q, sym.dq, ddq], list(outputs.values()), ["q", "dq", "ddq"], list(outputs))
@@ -178,6 +180,30 @@ def test_coriolis(evaluated: tuple[str, dict]) -> None:
 
 def test_gravity(evaluated: tuple[str, dict]) -> None:
     _check(evaluated, "g")
+
+
+def test_gravity_rate(evaluated: tuple[str, dict]) -> None:
+    """∂g_j/∂q_j, from the subtrees' first moments (what the joints' braking averages gravity with)."""
+    _check(evaluated, "dg")
+
+
+def test_gravity_along_a_revolute_joint_is_the_sinusoid_of_its_rate() -> None:
+    """g_j(q + θ e_j) = g_j cos θ + (∂g_j/∂q_j) sin θ for a revolute joint, the others fixed:
+    Pinocchio's gravity at turned configurations against the closed form the braking uses."""
+    model = load_builtin_model("panda")
+    data = model.createData()
+    sym = SymbolicRobot(model)
+    rate = ca.Function("rate", [sym.q], [sym.gravity_rate()])
+    rng = np.random.default_rng(7)
+    for _ in range(5):
+        q = random_configuration(model, rng, margin=0.0)
+        g, dg = pin.computeGeneralizedGravity(model, data, q).copy(), np.array(rate(q)).ravel()
+        for j in range(model.nv):
+            for theta in rng.uniform(-3.0, 3.0, size=3):
+                turned = q.copy()
+                turned[j] += theta
+                expected = g[j] * np.cos(theta) + dg[j] * np.sin(theta)
+                assert pin.computeGeneralizedGravity(model, data, turned)[j] == pytest.approx(expected, abs=1e-9)
 
 
 def test_inverse_dynamics(evaluated: tuple[str, dict]) -> None:

@@ -280,8 +280,9 @@ def _joint_and_cartesian_text(controller: Controller) -> str:
     if how is _QP_ENFORCEMENT:
         nominal = "|ddq| max" if np.all(np.isfinite(lim.a_max)) else \
             f"|ddq| max ({number(DEFAULT_BRAKING)} rad/s² or m/s² where none)"
-        torque = (", or at what its own torque limit gives in the state where that is less: (|tau| max ± (nu + g)_j) "
-                  "/ M_jj, the other joints still (a joint gravity pulls toward its bound slows down earlier)"
+        torque = (", or at what its own torque limit gives on the way to the limit where that is less: "
+                  "(|tau| max ± (nu + g)_j) / M_jj, g_j averaged over the way, the other joints still (a joint "
+                  "gravity pulls toward its bound slows down earlier)"
                   if lim.torque_limited_braking else " (limits.joint_braking: acceleration_limit)")
         lines += wrap(f"The position bounds assume a joint brakes at {nominal}{torque}.", indent=" *   ")
     if np.isfinite(lim.a_max).any() and how is _QP_ENFORCEMENT:

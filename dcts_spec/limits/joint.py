@@ -21,23 +21,47 @@ BRAKING_FLOOR = 0.01
 
 @dataclass
 class BrakingDynamics:
-    """What a joint's braking is taken from: M(q)'s diagonal, the bias ν(q, q̇) + g(q) and the
-    torque limits |τ| ≤ τ_max (run-time parameters where there are; inf where none)."""
+    """What a joint's braking is taken from: M(q)'s diagonal, the Coriolis and gravity torques, and
+    the torque limits |τ| ≤ τ_max (run-time parameters where there are; inf where none)."""
 
-    inertia: ca.SX  # M_jj (n)
-    bias: ca.SX  # ν + g (n)
+    inertia: ca.SX  # M_jj, which joint j's own motion does not change (n)
+    coriolis: ca.SX  # ν(q, q̇), taken as it is now along the way (n)
+    gravity: ca.SX  # g(q) (n)
+    gravity_rate: ca.SX  # ∂g_j/∂q_j, the others fixed (n; `SymbolicRobot.gravity_rate`)
+    revolute: list[bool]
     torque_limit: ca.SX  # (n)
 
-    def braking(self, j: int, nominal: ca.SX | float) -> tuple[ca.SX, ca.SX]:
-        """(toward its upper bound, toward its lower bound): the deceleration joint j's own
-        torque limit gives it at this state with the other joints still, τ = h + M e_j a, i.e.
-        (τ_max ± h_j) / M_jj, at most `nominal` (the acceleration limit the position bounds
-        assume otherwise) and at least BRAKING_FLOOR of it. Measured τ_ext is left out: the
-        bounds follow the model, not a sensor's noise (a payload the robot carries belongs in
-        `robot.payloads`)."""
-        limit, bias, inertia = self.torque_limit[j], self.bias[j], self.inertia[j]
+    def braking(self, j: int, nominal: ca.SX | float, x: ca.SX, x_min: ca.SX | float,
+                x_max: ca.SX | float) -> tuple[ca.SX, ca.SX]:
+        """(toward x_max, toward x_min): the mean deceleration joint j's own torque limit gives it
+        on its way to that bound, the other joints still: τ_max ∓ (ν_j + g_j) over M_jj, with g_j
+        averaged over the way, so a joint that gravity pulls toward its bound less and less as it
+        gets there (an arm swinging down to hang) counts on the braking it will have (the energy it
+        can take out before the bound). At most `nominal` (the acceleration limit), at least
+        BRAKING_FLOOR of it. Measured τ_ext is left out: the bounds follow the model, not a
+        sensor's noise (a payload the robot carries belongs in `robot.payloads`)."""
+        limit, inertia, coriolis = self.torque_limit[j], self.inertia[j], self.coriolis[j]
+        g, rate = self.gravity[j], self.gravity_rate[j]
+        toward_max = _mean_gravity(g, rate, x_max - x) if self.revolute[j] and _finite(x_max) else g
+        toward_min = _mean_gravity(g, -rate, x - x_min) if self.revolute[j] and _finite(x_min) else g
         floor = BRAKING_FLOOR * nominal
-        return tuple(ca.fmax(ca.fmin((limit + sign * bias) / inertia, nominal), floor) for sign in (1.0, -1.0))
+        return tuple(ca.fmax(ca.fmin(value / inertia, nominal), floor)
+                     for value in (limit + coriolis + toward_max, limit - coriolis - toward_min))
+
+
+def _finite(limit: ca.SX | float) -> bool:
+    return isinstance(limit, ca.SX) or np.isfinite(limit)
+
+
+# Below this gap (rad) the mean gravity torque over it is its Taylor polynomial (no 0/0).
+_SHORT_GAP = 1e-4
+
+
+def _mean_gravity(g: ca.SX, rate: ca.SX, gap: ca.SX) -> ca.SX:
+    """The mean of g cos θ + rate sin θ over θ ∈ [0, gap] (g at once beyond the bound, gap ≤ 0)."""
+    gap = ca.fmax(gap, 0.0)
+    long = (g * ca.sin(gap) + rate * (1.0 - ca.cos(gap))) / ca.fmax(gap, _SHORT_GAP)
+    return ca.if_else(gap > _SHORT_GAP, long, g + 0.5 * rate * gap)
 
 
 def joint_rows(limits: JointLimits, q: ca.SX, dq: ca.SX, dt: float, names: list[str],
@@ -58,7 +82,7 @@ def joint_rows(limits: JointLimits, q: ca.SX, dq: ca.SX, dt: float, names: list[
             continue
         braking = a_max[j] if np.isfinite(limits.a_max[j]) else DEFAULT_BRAKING
         if dynamics is not None and limits.torque_limited_braking:
-            braking = dynamics.braking(j, braking)
+            braking = dynamics.braking(j, braking, q[j], q_min[j], q_max[j])
         lo, hi = acceleration_bounds(q[j], dq[j], q_min[j], q_max[j], v_max[j], a_max[j], braking, dt,
                                      (limits.q_min[j], limits.q_max[j], limits.v_max[j]))
         selection = ca.SX.zeros(1, n)

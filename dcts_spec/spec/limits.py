@@ -110,7 +110,7 @@ class LimitsSpec(StrictModel):
     joint_braking: Literal["torque_limited", "acceleration_limit"] = Field(
         "torque_limited", description="the deceleration the joint position bounds count on to stop a joint in "
         "time: `torque_limited`, its acceleration limit (10 rad/s² without one) or less where its own torque limit "
-        "gives less in the state, so a joint gravity pulls toward its bound slows down earlier; "
+        "gives less on the way to the bound, so a joint gravity pulls toward its bound slows down earlier; "
         "`acceleration_limit`, always that limit (Del Prete 2018, as the paper), which near such a bound can ask "
         "for more braking than the torques give (the bound then gives way, status \"limits relaxed\")",
         examples=["acceleration_limit"])

@@ -406,6 +406,40 @@ class SymbolicRobot:
         """Generalized gravity g(q), (nv, 1), for model.gravity."""
         return self._gravity
 
+    @cached_property
+    def _gravity_rate(self) -> ca.SX:
+        # first moments Σ m_b c_b of every subtree about the world origin, from the leaves
+        mass = [float(inertia.mass) for inertia in self.model.inertias]
+        moment = [_zeros3()] + [m * op + ca.mtimes(orot, ca.SX(m * np.asarray(self.model.inertias[i].lever)))
+                                for i, (m, (orot, op)) in enumerate(zip(mass[1:], self._world[1:]), start=1)]
+        for i, joint in reversed(self._joints.items()):
+            if joint.parent > 0:
+                moment[joint.parent] = moment[joint.parent] + moment[i]
+                mass[joint.parent] += mass[i]
+        rate = ca.SX.zeros(self.nv, 1)
+        g = ca.SX(self.model.gravity.linear)
+        for i, joint in self._joints.items():
+            if joint.revolute:  # (a prismatic joint's own motion leaves its gravity force as it is)
+                orot, op = self._world[i]
+                axis = ca.mtimes(orot, joint.axis)
+                arm = moment[i] - mass[i] * op  # the subtree's first moment about the joint's origin
+                rate[joint.idx_v] = -ca.dot(axis, ca.cross(ca.cross(axis, arm), g))
+        return rate
+
+    @property
+    def revolute(self) -> list[bool]:
+        """Is joint j (in velocity order) revolute (else prismatic)?"""
+        kinds = [False] * self.nv
+        for joint in self._joints.values():
+            kinds[joint.idx_v] = joint.revolute
+        return kinds
+
+    def gravity_rate(self) -> ca.SX:
+        """∂g_j/∂q_j for each joint j, the other joints fixed, (nv, 1). Turning a revolute joint
+        turns its subtree about the joint's axis, so its gravity torque is a sinusoid of zero mean:
+        g_j(q_j + θ) = g_j cos θ + (∂g_j/∂q_j) sin θ; a prismatic joint's is constant (0 here)."""
+        return self._gravity_rate
+
     def inverse_dynamics(self, ddq: ca.SX) -> ca.SX:
         """τ = M ddq + ν + g by RNEA; the velocity terms are those of coriolis(), since RNEA is
         affine in (ddq, gravity) once the velocities are fixed."""
