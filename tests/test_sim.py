@@ -739,6 +739,33 @@ scenario:
 """
 
 
+def test_a_crossing_from_the_held_torque_is_said_and_an_acceleration_limit_removes_it():
+    """The plant holds the torque over a period (MuJoCo's rk4), the controller's model the
+    acceleration. Without an acceleration limit a Panda reaching hard commands ~2000 rad/s² in a
+    step, the two part by ~1e-3 rad/s and a velocity bound the model holds is crossed after "ok"
+    steps: the summary says so and what keeps it small. With 20 rad/s² nothing is crossed."""
+    from dcts_spec.analysis.report import describe
+
+    text = """version: 1
+name: panda_reaching_hard
+robot: {{model: panda}}
+limits:
+{acceleration}  cartesian:
+    - {{frame: panda_hand_tcp, axis: z, min: 0.25}}
+tasks:
+  - {{name: reach, type: position, frame: panda_hand_tcp, priority: 1, gains: {{kp: 400, kd: 40}}, reference: {{position: [0.5, 0.0, 0.0]}}}}
+  - {{name: posture, type: joint, priority: 2, gains: {{kp: 10, kd: 6}}, reference: {{q: [0, -0.3, 0, -2.0, 0, 1.8, 0.8]}}}}
+scenario: {{duration: 0.05, initial_q: [0, -0.3, 0, -2.0, 0, 1.8, 0.8]}}
+"""
+    sim, log = simulate(text.format(acceleration=""))
+    run = analyze(sim, log)
+    assert run.summary["crossed_after_ok_steps"] >= 1 and run.summary["max_joint_velocity_violation"] > 1e-4
+    assert "the torque held over a period, not the acceleration" in describe(run)
+    sim, log = simulate(text.format(acceleration="  joint_acceleration: {max: 20}\n"))
+    run = analyze(sim, log)
+    assert run.summary["crossed_after_ok_steps"] == 0 and run.summary["max_joint_velocity_violation"] < 1e-5
+
+
 def test_a_joint_gravity_pulls_toward_its_limit_brakes_as_its_torque_allows_and_stops_inside():
     """A UR10 with a 6 kg tool swings its shoulder lift up toward its limit (0 rad) at 1.46 rad/s;
     gravity and the payload pull it that way, and its 330 Nm leave ~6 rad/s² of braking where its

@@ -80,9 +80,14 @@ def describe(run: RunResult) -> str:
                "its bounds are not rows; see the worst excess above)")
     lines.append(f"  solver     {s['solver_failures']} failures, {relaxed}, min scaling {min_scaling_text(s)}")
     if s.get("crossed_after_ok_steps"):
+        causes = "a payload it does not know: robot.payloads; τ_ext one step late; a mass mismatch"
+        if not s["joint_acceleration_limits"]:
+            # (the plant holds the torque over a period, the model the acceleration: they part as
+            # the acceleration grows; docs/formulations.md)
+            causes += (f"; the torque held over a period, not the acceleration, at up to "
+                       f"{q('max_controller_acceleration')}: a limits.joint_acceleration keeps that small")
         lines.append(f"  model      {s['crossed_after_ok_steps']} \"ok\" steps left a bound crossed further (the first at "
-                     f"t = {s['crossed_after_ok_first']:.4g} s): the plant is not the controller's model (a payload "
-                     "it does not know: robot.payloads; τ_ext one step late; a mass mismatch)")
+                     f"t = {s['crossed_after_ok_first']:.4g} s): the plant is not the controller's model ({causes})")
     for r in s.get("relaxed_bounds", {}).values():
         beyond = f"; beyond {r['beyond']}" if "beyond" in r else ""
         lines.append(f"  relaxed    {r['bound']}: {r['steps']} steps between t = {r['first']:.4g} s and {r['last']:.4g} s"
