@@ -785,6 +785,32 @@ def test_a_joint_gravity_pulls_toward_its_limit_brakes_as_its_torque_allows_and_
     assert torque["max_joint_velocity_violation"] < 1e-5 and torque["torque_jump_steps"] <= 3
 
 
+def test_a_panda_leaning_with_its_payload_to_its_shoulder_limit_stops_inside():
+    """A Panda with a 3 kg payload at its hand leans forward to its shoulder's limit (a posture
+    target beyond it): the further it leans, the harder gravity pulls it on. Counting on its
+    15 rad/s² acceleration limit it crossed the limit by 0.066 rad (406 relaxed steps, 19 torque
+    steps above 10 % of a limit); counting on its torque's braking it stops inside."""
+    text = """version: 1
+name: panda_lean
+robot:
+  model: panda
+  payloads: [{{frame: panda_hand_tcp, mass: 3.0}}]
+limits:
+  joint_acceleration: {{max: 15}}
+  joint_braking: {braking}
+tasks:
+  - {{name: posture, type: joint, priority: 1, gains: {{kp: 60, kd: 4}}, reference: {{q: [0, 2.5, 0, -0.5, 0, 1.8, 0.8]}}}}
+scenario: {{duration: 1.3, initial_q: [0, 0.0, 0, -0.5, 0, 1.8, 0.8]}}
+"""
+    summaries = {}
+    for braking in ("torque_limited", "acceleration_limit"):
+        sim, log = simulate(text.format(braking=braking))
+        summaries[braking] = analyze(sim, log).summary
+    assert summaries["acceleration_limit"]["max_joint_position_violation"] > 0.03
+    torque = summaries["torque_limited"]
+    assert torque["max_joint_position_violation"] < 1e-5 and torque["limits_relaxed"] == 0
+
+
 def test_the_braking_the_bounds_assume_is_the_torque_limit_s_in_the_state():
     """The shoulder lift's upper acceleration bound in the compiled controller equals the one the
     shaping gives with the braking computed independently (Pinocchio's CRBA and RNEA: (τ_max + h)/M_jj,
