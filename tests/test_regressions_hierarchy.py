@@ -64,12 +64,11 @@ def _accel(c, q, dq, tau) -> np.ndarray:
     return pin.aba(c.robot.model, c.robot.model.createData(), np.asarray(q, float), np.asarray(dq, float), np.asarray(tau, float))
 
 
-def _bench_text(torque: str = "100", velocity: str = BENCH_VELOCITY, braking: str = "torque_limited") -> str:
+def _bench_text(torque: str = "100", velocity: str = BENCH_VELOCITY) -> str:
     text = BENCH.read_text()
     old_t, old_v = "joint_torque: {max: 100}", f"joint_velocity: {{max: {BENCH_VELOCITY}, unit: deg/s}}"
     assert old_t in text and old_v in text, "specs/bench_iiwa14.yaml changed: update this test"
-    return (text.replace(old_t, f"joint_torque: {{max: {torque}}}\n  joint_braking: {braking}")
-            .replace(old_v, f"joint_velocity: {{max: {velocity}, unit: deg/s}}"))
+    return text.replace(old_t, f"joint_torque: {{max: {torque}}}").replace(old_v, f"joint_velocity: {{max: {velocity}, unit: deg/s}}")
 
 
 @functools.lru_cache(maxsize=None)
@@ -125,9 +124,7 @@ def test_posture_beyond_joint_limit_commands_nothing(with_position_task):
 # torque limit at 30 Nm. Braking joint 2 from 1.1–1.2 × 0.5236 rad/s back to its limit in one
 # period needs 52–105 rad/s²: feasible up to ≈ 1.154 × v_max, infeasible beyond (status 1).
 # With the bench's own 110 deg/s, braking needs 192–384 rad/s², infeasible over the whole sweep
-# under any torque limit within the URDF's 100 Nm. The position bounds brake at the acceleration
-# limit: at 30 Nm gravity pulls joint 2 up harder than its torque can hold, so bounds that brake as
-# the torque allows (the default) call the whole sweep infeasible, as it is.
+# under any torque limit within the URDF's 100 Nm.
 
 SWEEP_Q = np.array([-0.78, 1.0, 2.07, -1.65, -2.08, 2.0, 0.0])
 SWEEP_TORQUE = "[30, 30, 30, 30, 30, 30, 30]"
@@ -137,7 +134,7 @@ SWEEP_STEP = 1e-4  # rad/s
 
 @functools.lru_cache(maxsize=None)
 def _sweep():
-    c = _controller(_bench_text(SWEEP_TORQUE, SWEEP_VELOCITY, "acceleration_limit"))
+    c = _controller(_bench_text(SWEEP_TORQUE, SWEEP_VELOCITY))
     v_max = c.robot.limits.v_max[1]
     speeds = np.arange(1.10 * v_max, 1.20 * v_max + 0.5 * SWEEP_STEP, SWEEP_STEP)
     rows = []
@@ -524,23 +521,24 @@ def test_status_ok_only_with_the_state_within_every_limit(robot):
 
 def test_beyond_its_envelope_the_braking_is_not_capped_by_the_acceleration_limit():
     """A joint beyond its velocity limit by Δv: its bound asks for the braking that brings it back
-    within one period, Δv/dt, beyond the 20 rad/s² limit where Δv > a_max·dt (the limit gives way
-    by exactly what that needs); continuous across a_max·dt; within its limits, bounded by
+    within one period (to VELOCITY_MARGIN below the limit), Δv/dt, beyond the 20 rad/s² limit
+    where Δv > a_max·dt (the limit gives way by exactly what that needs); continuous across a_max·dt; within its limits, bounded by
     ±a_max. A velocity limit lowered at run time (the envelope is the compiled one) is reached
     braking at the acceleration limit."""
-    from dcts_spec.limits.viability import acceleration_bounds
+    from dcts_spec.limits.viability import VELOCITY_MARGIN, acceleration_bounds
 
     v_max, a_max = 2.0, 20.0
+    aim = (1.0 - VELOCITY_MARGIN) * v_max  # (what the velocity bound aims at)
 
     def bounds(v: float, limit: float = v_max) -> tuple[float, float]:
         lo, hi = acceleration_bounds(0.0, v, -3.0, 3.0, limit, a_max, a_max, DT, (-3.0, 3.0, v_max))
         return float(lo), float(hi)
 
     for v in (2.5, 2.0 + 1.5 * a_max * DT):  # beyond by more than a_max·dt
-        assert bounds(v) == pytest.approx(((v_max - v) / DT,) * 2, rel=1e-12), v
-        assert bounds(-v) == pytest.approx(((v - v_max) / DT,) * 2, rel=1e-12), v
+        assert bounds(v) == pytest.approx(((aim - v) / DT,) * 2, rel=1e-12), v
+        assert bounds(-v) == pytest.approx(((v - aim) / DT,) * 2, rel=1e-12), v
     lo, hi = bounds(2.0 + 0.5 * a_max * DT)  # beyond, but the limit can bring it back
-    assert lo == -a_max and hi == pytest.approx(-0.5 * a_max, rel=1e-9)
+    assert lo == -a_max and hi == pytest.approx((aim - 2.0) / DT - 0.5 * a_max, rel=1e-9)
     edge = 2.0 + a_max * DT
     assert bounds(edge - 1e-9)[1] == pytest.approx(bounds(edge + 1e-9)[1], abs=1e-5)
     for v in np.linspace(-1.9, 1.9, 9):  # within: never beyond ±a_max

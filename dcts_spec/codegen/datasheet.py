@@ -16,6 +16,7 @@ from ..formulations.parameters import ParameterInput
 from ..parameter_ramp import ramp_steps
 from ..limits.joint import DEFAULT_BRAKING
 from ..limits.naming import interval_text, joint_unit
+from ..limits.viability import VELOCITY_MARGIN
 from ..robot.collision import resolve_collision
 from ..robot.resolve import locked_joints
 from ..tasks import JointTask, Task
@@ -283,8 +284,11 @@ def _joint_and_cartesian_text(controller: Controller) -> str:
         torque = (", or at what its own torque limit gives on the way to the limit where that is less: "
                   "(|tau| max ± (nu + g)_j) / M_jj, g_j averaged over the way, the other joints still (a joint "
                   "gravity pulls toward its bound slows down earlier)"
-                  if lim.torque_limited_braking else " (limits.joint_braking: acceleration_limit)")
-        lines += wrap(f"The position bounds assume a joint brakes at {nominal}{torque}.", indent=" *   ")
+                  if lim.torque_limited_braking else " (limits.joint_braking: torque_limited counts on no more than "
+                  "the torque gives)")
+        lines += wrap(f"The position bounds assume a joint brakes at {nominal}{torque}. The velocity bounds aim "
+                      f"{number(100 * VELOCITY_MARGIN)} % below |dq| max: the torque is held over a period, not the "
+                      "acceleration.", indent=" *   ")
     if np.isfinite(lim.a_max).any() and how is _QP_ENFORCEMENT:
         lines += wrap("|ddq| max bounds the command; a joint beyond its compiled position or velocity limit (after "
                       "a push) brakes back harder than that, as its torque limit allows.", indent=" *   ")

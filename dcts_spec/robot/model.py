@@ -18,9 +18,9 @@ class JointLimits:
     v_max: np.ndarray
     tau_max: np.ndarray
     a_max: np.ndarray  # inf unless the spec gives joint accelerations
-    # the position bounds assume braking at a_max, or less where the torque limit gives less
-    # (limits.joint_braking: "torque_limited"); False: always at a_max ("acceleration_limit")
-    torque_limited_braking: bool = True
+    # the position bounds assume braking at a_max (limits.joint_braking: "acceleration_limit"), or
+    # less where the torque limit gives less ("torque_limited")
+    torque_limited_braking: bool = False
 
     def unbounded(self, j: int) -> bool:
         """Has joint j no position limit on either side (a URDF continuous joint: robot/urdf.py)?"""

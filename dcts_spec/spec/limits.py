@@ -107,13 +107,15 @@ class LimitsSpec(StrictModel):
         None, description="joint acceleration bounds; default: none", examples=[{"max": 20}])
     joint_torque: JointTorqueLimits | None = Field(
         None, description="joint torque bounds; default: the URDF's effort limits", examples=[{"max": 100}])
-    joint_braking: Literal["torque_limited", "acceleration_limit"] = Field(
-        "torque_limited", description="the deceleration the joint position bounds count on to stop a joint in "
-        "time: `torque_limited`, its acceleration limit (10 rad/s² without one) or less where its own torque limit "
-        "gives less on the way to the bound, so a joint gravity pulls toward its bound slows down earlier; "
-        "`acceleration_limit`, always that limit (Del Prete 2018, as the paper), which near such a bound can ask "
-        "for more braking than the torques give (the bound then gives way, status \"limits relaxed\")",
-        examples=["acceleration_limit"])
+    joint_braking: Literal["acceleration_limit", "torque_limited"] = Field(
+        "acceleration_limit", description="the deceleration the joint position bounds count on to stop a joint in "
+        "time: `acceleration_limit`, its acceleration limit (10 rad/s² without one; Del Prete 2018, as the paper), "
+        "which near a bound gravity pulls the joint toward can ask for more braking than the torques give (the "
+        "bound then gives way, status \"limits relaxed\"); `torque_limited`, less where the joint's own torque "
+        "limit gives less on the way to the bound, the other joints still, so such a joint slows down earlier: it "
+        "stops a loaded arm inside its joint limits, but where the other joints must move it can ask for braking "
+        "the arm does not have, and another bound gives way instead (docs/formulations.md)",
+        examples=["torque_limited"])
     cartesian: list[CartesianLimit] = Field(
         default_factory=list, description="bounds on frame origins (planes the frames stay between)",
         examples=[[{"frame": "tool", "axis": "z", "min": 0.1}]])
