@@ -147,7 +147,8 @@ def build_problem(spec: Spec, robot: Robot) -> ControlProblem:
 
     mass, coriolis, gravity = sym.mass_matrix(), sym.coriolis(), sym.gravity()
     limit = torque_limit(params, robot.limits.tau_max)
-    braking = BrakingDynamics(ca.diag(mass), coriolis, gravity, sym.gravity_rate(), sym.revolute, limit)
+    braking = (BrakingDynamics(ca.diag(mass), coriolis, gravity, sym.gravity_rate(), sym.revolute, limit)
+               if robot.limits.torque_limited_braking else None)
     period = spec.controller.period
     rows = AccelerationRows.stack(
         [

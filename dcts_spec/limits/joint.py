@@ -67,19 +67,11 @@ def _mean_gravity(g: ca.SX, rate: ca.SX, x: ca.SX, bound: ca.SX | float, directi
     the kinematics compute already: no trigonometric call of its own (28 of them cost the bench
     spec's step 0.3 µs)."""
     gap = direction * (bound - x)
-    sin_x, cos_x, sin_b, cos_b = ca.sin(x), ca.cos(x), _sin(bound), _cos(bound)
+    sin_x, cos_x, sin_b, cos_b = ca.sin(x), ca.cos(x), ca.sin(bound), ca.cos(bound)  # (floats for a number)
     sin_gap = direction * (sin_b * cos_x - cos_b * sin_x)
     cos_gap = cos_b * cos_x + sin_b * sin_x
     long = (g * sin_gap + rate * (1.0 - cos_gap)) / ca.fmax(gap, _SHORT_GAP)
     return ca.if_else(gap > _SHORT_GAP, long, g + 0.5 * rate * ca.fmax(gap, 0.0))
-
-
-def _sin(value: ca.SX | float) -> ca.SX | float:
-    return ca.sin(value) if isinstance(value, ca.SX) else float(np.sin(value))
-
-
-def _cos(value: ca.SX | float) -> ca.SX | float:
-    return ca.cos(value) if isinstance(value, ca.SX) else float(np.cos(value))
 
 
 def joint_rows(limits: JointLimits, q: ca.SX, dq: ca.SX, dt: float, names: list[str],
@@ -87,9 +79,8 @@ def joint_rows(limits: JointLimits, q: ca.SX, dq: ca.SX, dt: float, names: list[
     """One row per joint that has a finite position, velocity or acceleration bound. `runtime`
     replaces some limits (q_min, q_max, v_max, a_max: one value per joint) by run-time
     parameters; which rows and terms exist follows the compiled `limits`. The position bounds
-    assume braking at the acceleration limit (DEFAULT_BRAKING without one), or at what the torque
-    limit gives where that is less (a joint gravity pulls toward its bound), with `dynamics` and
-    `limits.torque_limited_braking`."""
+    assume braking at the acceleration limit (DEFAULT_BRAKING without one), or, given `dynamics`
+    (limits.joint_braking "torque_limited"), at what the torque limit gives where that is less."""
     n = q.shape[0]
     runtime = runtime or {}
     q_min, q_max, v_max, a_max = (runtime.get(key, getattr(limits, key)) for key in ("q_min", "q_max", "v_max", "a_max"))
@@ -99,7 +90,7 @@ def joint_rows(limits: JointLimits, q: ca.SX, dq: ca.SX, dt: float, names: list[
         if not np.isfinite(bounded).any():
             continue
         braking = a_max[j] if np.isfinite(limits.a_max[j]) else DEFAULT_BRAKING
-        if dynamics is not None and limits.torque_limited_braking:
+        if dynamics is not None:
             braking = dynamics.braking(j, braking, q[j], q_min[j], q_max[j])
         lo, hi = acceleration_bounds(q[j], dq[j], q_min[j], q_max[j], v_max[j], a_max[j], braking, dt,
                                      (limits.q_min[j], limits.q_max[j], limits.v_max[j]))
