@@ -8,15 +8,16 @@ from typing import TYPE_CHECKING, Any
 from .spec import Spec, SpecError, load_spec
 
 if TYPE_CHECKING:
-    from .codegen import compile_c
+    from .codegen import compile_c, compiled_controller
     from .controller import Controller, StepResult, build_controller
 
 # Names whose modules import CasADi and Pinocchio (~0.7 s): loaded on first use (PEP 562), so
 # that `import dcts_spec`, `dcts --help` and rejecting a broken spec stay fast.
-_LAZY = {"compile_c": ".codegen", "Controller": ".controller", "StepResult": ".controller",
+_LAZY = {"compile_c": ".codegen", "compiled_controller": ".codegen", "Controller": ".controller", "StepResult": ".controller",
          "build_controller": ".controller"}
 
-__all__ = ["Controller", "Spec", "SpecError", "StepResult", "build_controller", "compile_c", "load_spec"]
+__all__ = ["Controller", "Spec", "SpecError", "StepResult", "build_controller", "compile_c", "compiled_controller",
+           "load_spec"]
 
 
 def __getattr__(name: str) -> Any:

@@ -19,6 +19,7 @@ from importlib.metadata import version as daqp_version
 from pathlib import Path
 
 import numpy as np
+import dcts_spec
 import pinocchio as pin
 import pytest
 from typer.testing import CliRunner
@@ -737,10 +738,15 @@ def test_cache_builds_once_then_loads(tmp_path):
     library = entry / "libminimal.so"
     built_at = library.stat().st_mtime_ns
     assert json.loads((entry / KEY_FILE).read_text())["digest"] == key.digest
-    with cache.load(MINIMAL) as second:  # a file name works too
+    # the public API's way in (a file name works too): the cached entry, with the Python runtime's answers
+    with dcts_spec.compiled_controller(MINIMAL, cache=cache) as second:
         assert cache.last_hit is True and second.directory == entry
         for s, tau in zip(states, expected):
             np.testing.assert_array_equal(second.step(*s.as_tuple()[:3]).tau, tau)
+            python = controller.step(*s.as_tuple()[:3])
+            # (where the QP data determine the torque less well than 1e-6, as the golden test allows)
+            spread = controller.answer_spread(*s.as_tuple()[:3], None, python.x, 16, 1e-4)[0]
+            assert relative_difference(python.tau, tau) <= max(1e-6, 10 * spread)
     assert library.stat().st_mtime_ns == built_at  # loaded, not rebuilt
     assert cache.entries() == [entry]
     assert not [p for p in cache.directory.iterdir() if p.name.startswith((".tmp-", ".trash-"))]

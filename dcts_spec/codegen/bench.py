@@ -345,7 +345,7 @@ def format_report(r: dict) -> str:
     row("  fallback torque (only when needed)", c["fallback"])
     py = r["python_step"]
     row(f"Python runtime step ({py['states']} closed-loop states)", py)
-    row("  the same bundle's C step through ctypes, same states", py["ctypes_step"])
+    row("  the same bundle's C step through ctypes (compiled_controller)", py["ctypes_step"])
     row("Pinocchio computeAllTerms + frame Jacobians", r["pinocchio_terms"])
     data_share = c["qp_data"]["median_us"] / c["step"]["median_us"]
     lines += [
