@@ -112,5 +112,5 @@ def test_a_waypoint_beyond_a_bound_is_a_warning():
 
 def test_limits_wider_than_the_urdf_name_the_values():
     text = _spec("{frame: tool, axis: z, min: 0.1}").replace("joint_torque: {max: 100}", "joint_torque: {max: [100, 200, 100, 100, 100, 100, 100]}")
-    with pytest.raises(SpecError, match=r"limits\.joint_torque\.max: above the URDF's effort limit \(joint 2: 200 vs 100 Nm\)"):
+    with pytest.raises(SpecError, match=r"limits\.joint_torque\.max: above the URDF's effort limit \(joint 2, joint2: 200 vs 100 Nm\)"):
         validate_spec(load_spec_text(text))

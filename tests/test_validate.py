@@ -365,6 +365,23 @@ def test_the_gravity_warning_names_the_joint_and_a_prismatic_joints_force_in_n(t
     assert any("(joint 1, lift, needs 78.5 N, limit 50.0 N)" in w for w in warnings), warnings
 
 
+def test_limit_messages_name_the_joint_and_a_prismatic_joints_unit(tmp_path: Path) -> None:
+    """Limits beyond the URDF's said "joint 1: 2e+04 vs 1e+04 Nm" of a PR2's torso lift (found from
+    outside): now the joint's name, and m/s and N for a prismatic joint."""
+    (tmp_path / "lift.urdf").write_text(LIFT_URDF)
+    spec = tmp_path / "lift.yaml"
+    spec.write_text("version: 1\nname: lift\nrobot: {urdf: lift.urdf}\nlimits:\n"
+                    "  joint_torque: {max: [600, 60, 50]}\n  joint_velocity: {max: [0.5, 2, 2]}\n"
+                    "tasks:\n  - {name: posture, type: joint, priority: 1, gains: {kp: 10, kd: 6}, "
+                    "reference: {q: [0.2, 0.1, 0.2]}}\n")
+    with pytest.raises(SpecError) as raised:
+        validate_file(spec)
+    messages = [d.message for d in raised.value.diagnostics]
+    assert any("above the URDF's effort limit (joint 1, lift: 600 vs 500 N, joint 2, shoulder: 60 vs 50 Nm)" in m
+               for m in messages), messages
+    assert any("above the URDF's velocity limit (joint 1, lift: 0.5 vs 0.3 m/s)" in m for m in messages), messages
+
+
 @pytest.mark.parametrize(("inertia", "severity", "words"), [
     ('ixx="0.02" iyy="0.02" izz="0.05" ixy="0" ixz="0" iyz="0"', "warning", "break A + B ≥ C"),  # (CAD rounding)
     ('ixx="0.02" iyy="0.02" izz="0.02" ixy="0.05" ixz="0" iyz="0"', "error", "not positive definite"),

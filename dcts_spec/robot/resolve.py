@@ -8,6 +8,7 @@ import os
 import sys
 import tempfile
 from collections.abc import Iterator
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -62,7 +63,8 @@ def resolve_robot(spec: Spec) -> tuple[Robot, list[Diagnostic]]:
             diags.append(src.diagnostic(
                 ("robot",), f"the URDF gives {', '.join(unlimited)} no {attribute} limit ({attribute}=\"0\" or none): "
                             f"driven without one; give limits.{key} to bound them", "warning"))
-    limits = _merge_limits(spec, urdf_limits, prismatic_joints(model), diags)
+    names = [model.names[j] for j in range(1, model.njoints)]  # (one velocity each: revolute or prismatic)
+    limits = _merge_limits(spec, urdf_limits, _JointUnits(names, prismatic_joints(model)), diags)
     bounds = _cartesian_bounds(spec, model, diags)
     if any(d.severity == "error" for d in diags):
         raise SpecError(diags)
@@ -298,44 +300,58 @@ def _add_payloads(spec: Spec, model: pin.Model, diags: list[Diagnostic]) -> None
         model.inertias[frame.parentJoint] = model.inertias[frame.parentJoint] + frame.placement.act(mass)
 
 
+@dataclass(frozen=True)
+class _JointUnits:
+    """The joints as limit messages name them, and which are prismatic (their limits in m, m/s,
+    m/s² and N where a revolute joint's are in rad, rad/s, rad/s² and Nm)."""
+
+    names: list[str]
+    prismatic: np.ndarray
+
+    def value(self, j: int, text: str, unit: str) -> str:
+        """`joint 3, <name>: <text> <unit>`, in the unit of the joint's kind (as the gravity warning)."""
+        if self.prismatic[j]:
+            unit = {"Nm": "N"}.get(unit, unit.replace("rad", "m"))
+        return f"joint {j + 1}, {self.names[j]}: {text} {unit}"
+
+
 def _vector(
-    value: float | tuple[float, ...], unit: str, prismatic: np.ndarray, path: KeyPath, src: SourceMap,
+    value: float | tuple[float, ...], unit: str, joints: _JointUnits, path: KeyPath, src: SourceMap,
     diags: list[Diagnostic], what: str
 ) -> np.ndarray | None:
     """A scalar-or-vector joint limit in SI (a prismatic joint's in m), or None (with a diagnostic)
     if its size is wrong."""
-    n = prismatic.size
+    n = joints.prismatic.size
     size = size_of(value)
     if size is not None and size != n:
         diags.append(src.diagnostic(path, f"{what} has {size} values but the robot has {n} joints"))
         return None
-    return np.array(joint_to_si(as_list(value, n), unit, prismatic), dtype=float)
+    return np.array(joint_to_si(as_list(value, n), unit, joints.prismatic), dtype=float)
 
 
-def _merge_limits(spec: Spec, urdf: JointLimits, prismatic: np.ndarray, diags: list[Diagnostic]) -> JointLimits:
+def _merge_limits(spec: Spec, urdf: JointLimits, joints: _JointUnits, diags: list[Diagnostic]) -> JointLimits:
     """Spec limits override the URDF's; wider than the URDF only when explicitly allowed."""
     src = spec.source
     lim = spec.limits
     q_min, q_max = urdf.q_min, urdf.q_max
     if (jp := lim.joint_position) is not None:
         base = ("limits", "joint_position")
-        lo = _vector(jp.min, jp.unit, prismatic, base + ("min",), src, diags, "min") if jp.min is not None else q_min
-        hi = _vector(jp.max, jp.unit, prismatic, base + ("max",), src, diags, "max") if jp.max is not None else q_max
+        lo = _vector(jp.min, jp.unit, joints, base + ("min",), src, diags, "min") if jp.min is not None else q_min
+        hi = _vector(jp.max, jp.unit, joints, base + ("max",), src, diags, "max") if jp.max is not None else q_max
         if lo is not None and hi is not None:
             bad = np.flatnonzero(lo >= hi)
             if bad.size:
                 j = bad[0]
-                diags.append(
-                    src.diagnostic(base + ("min",), f"min must be smaller than max (joint {j + 1}: {lo[j]:.4g} ≥ {hi[j]:.4g} rad)")
-                )
+                diags.append(src.diagnostic(
+                    base + ("min",), f"min must be smaller than max ({joints.value(j, f'{lo[j]:.4g} ≥ {hi[j]:.4g}', 'rad')})"))
             _outside(lo, urdf.q_min, lo < urdf.q_min - 1e-9, "rad", base + ("min",), "below the URDF's lower limit",
-                     jp.allow_outside_urdf, src, diags)
+                     jp.allow_outside_urdf, joints, src, diags)
             _outside(hi, urdf.q_max, hi > urdf.q_max + 1e-9, "rad", base + ("max",), "above the URDF's upper limit",
-                     jp.allow_outside_urdf, src, diags)
+                     jp.allow_outside_urdf, joints, src, diags)
             q_min, q_max = lo, hi
-    v_max = _symmetric(lim.joint_velocity, "joint_velocity", urdf.v_max, "velocity", "rad/s", prismatic, src, diags)
-    a_max = _symmetric(lim.joint_acceleration, "joint_acceleration", urdf.a_max, None, "rad/s²", prismatic, src, diags)
-    tau_max = _symmetric(lim.joint_torque, "joint_torque", urdf.tau_max, "effort", "Nm", prismatic, src, diags)
+    v_max = _symmetric(lim.joint_velocity, "joint_velocity", urdf.v_max, "velocity", "rad/s", joints, src, diags)
+    a_max = _symmetric(lim.joint_acceleration, "joint_acceleration", urdf.a_max, None, "rad/s²", joints, src, diags)
+    tau_max = _symmetric(lim.joint_torque, "joint_torque", urdf.tau_max, "effort", "Nm", joints, src, diags)
     return JointLimits(q_min=q_min, q_max=q_max, v_max=v_max, tau_max=tau_max, a_max=a_max,
                        torque_limited_braking=lim.joint_braking == "torque_limited")
 
@@ -346,7 +362,7 @@ def _symmetric(
     urdf: np.ndarray,
     urdf_name: str | None,
     unit: str,
-    prismatic: np.ndarray,
+    joints: _JointUnits,
     src: SourceMap,
     diags: list[Diagnostic],
 ) -> np.ndarray:
@@ -357,29 +373,22 @@ def _symmetric(
     if section is None:
         return urdf
     path = ("limits", key, "max")
-    values = _vector(section.max, section.unit, prismatic, path, src, diags, "max")
+    values = _vector(section.max, section.unit, joints, path, src, diags, "max")
     if values is None:
         return urdf
-    _positive(values, unit, path, src, diags)
     if urdf_name is not None:
         _outside(values, urdf, values > urdf + 1e-9, unit, path, f"above the URDF's {urdf_name} limit",
-                 section.allow_outside_urdf, src, diags)
+                 section.allow_outside_urdf, joints, src, diags)
     return values
 
 
-def _positive(values: np.ndarray, unit: str, path: KeyPath, src: SourceMap, diags: list[Diagnostic]) -> None:
-    bad = np.flatnonzero(values <= 0)
-    if bad.size:
-        diags.append(src.diagnostic(path, f"must be > 0 (joint {bad[0] + 1}: {values[bad[0]]:.4g} {unit})"))
-
-
 def _outside(values: np.ndarray, urdf: np.ndarray, mask: np.ndarray, unit: str, path: KeyPath, what: str, allowed: bool,
-             src: SourceMap, diags: list[Diagnostic]) -> None:
+             joints: _JointUnits, src: SourceMap, diags: list[Diagnostic]) -> None:
     """Joints whose spec limit is beyond the URDF's, with both values (in SI units)."""
-    joints = np.flatnonzero(mask)
-    if not joints.size:
+    beyond = np.flatnonzero(mask)
+    if not beyond.size:
         return
-    listed = ", ".join(f"joint {j + 1}: {values[j]:.4g} vs {urdf[j]:.4g} {unit}" for j in joints)
+    listed = ", ".join(joints.value(j, f"{values[j]:.4g} vs {urdf[j]:.4g}", unit) for j in beyond)
     if allowed:
         diags.append(src.diagnostic(path, f"{what} ({listed}), widened on purpose: allow_outside_urdf", "warning"))
     else:
