@@ -1394,6 +1394,67 @@ tasks:
     gains: {{kp: 10, kd: 6}}
     reference: {{q: [0, 0, 0.1309, -0.959931, 1.22173, -0.349065, -1.09083, 0, -0.610868, 0, -0.959931, -1.22173, 0.349065, -1.09083, 0, 0.610868, 0]}}
 """,
+    # Romeo's trunk, arms and legs (27 joints, base fixed), both hands' poses above a least-squares
+    # posture (scripts/bench_sizes.py's recipe): the final QP after the top level's scaling stage
+    # ran on a sliver, which DAQP called infeasible in Python and answered 5 % above its optimum in
+    # C: one "ok" vector 25 Nm apart (Cascade._scale_and_final now holds the stage's certified face)
+    "romeo27_hands_above_posture": """version: 1
+name: romeo27_hands_above_posture
+robot:
+  urdf: {urdf}/romeo_description/urdf/romeo_small.urdf
+  locked_joints: {{NeckYaw: 0, NeckPitch: 0.174533, HeadPitch: -0.0349065, HeadRoll: 0}}
+limits:
+  joint_torque: {{max: [18.4, 93.2, 93.2, 76.34, 51.52, 51.52, 18.4, 93.2, 93.2, 76.34, 51.52, 51.52, 161.804, 38.19, 18.062, 14.808, 12.04, 4.354, 1.724, 1.2, 38.19, 18.062, 14.808, 12.04, 4.354, 1.724, 1.2], allow_outside_urdf: true}}
+controller:
+  formulation: dcts
+tasks:
+  - name: l_gripper_pose
+    type: pose
+    frame: l_gripper
+    priority: 1
+    gains: {{kp: 100, kd: 20}}
+    reference: {{position: [0.394899, 0.118475, 0.0195002], rpy: [3.09352, 0.43292, -0.501738]}}
+  - name: r_gripper_pose
+    type: pose
+    frame: r_gripper
+    priority: 1
+    gains: {{kp: 100, kd: 20}}
+    reference: {{position: [0.394899, -0.118475, 0.0195002], rpy: [0.0480748, 0.43292, 0.501738]}}
+  - name: posture
+    type: joint
+    priority: 2
+    gains: {{kp: 10, kd: 6}}
+    reference: {{q: [0, 0.1309, -0.654497, 1.00357, 0.1309, 0, 0, -0.1309, -0.654497, 1.00357, 0.1309, 0, 0, 0.387815, 0.354924, 0, -0.7854, -1.5708, 0, 0, 0.387815, -0.354924, 0, 0.7854, 1.5708, 0, 0]}}
+""",
+    # PR2's torso lift (prismatic) and arms (their forearm and wrist rolls continuous), 15 joints
+    "pr2_torso_and_arms": """version: 1
+name: pr2_torso_and_arms
+robot:
+  urdf: {urdf}/pr2_description/urdf/pr2.urdf
+  locked_joints: {{head_pan_joint: 0, head_tilt_joint: 0.462511, l_gripper_l_finger_joint: 0.274, l_gripper_l_finger_tip_joint: 0.274, l_gripper_l_parallel_root_joint: 0.274, l_gripper_r_finger_joint: 0.274, l_gripper_r_finger_tip_joint: 0.274, l_gripper_r_parallel_root_joint: 0.274, laser_tilt_mount_joint: 0.349065, r_gripper_l_finger_joint: 0.274, r_gripper_l_finger_tip_joint: 0.274, r_gripper_l_parallel_root_joint: 0.274, r_gripper_r_finger_joint: 0.274, r_gripper_r_finger_tip_joint: 0.274, r_gripper_r_parallel_root_joint: 0.274}}
+limits:
+  joint_torque: {{max: [20000, 60, 60, 60, 60, 60, 20, 20, 60, 60, 60, 60, 60, 20, 20], allow_outside_urdf: true}}
+controller:
+  formulation: dcts
+tasks:
+  - name: l_gripper_tool_frame_pose
+    type: pose
+    frame: l_gripper_tool_frame
+    priority: 1
+    gains: {{kp: 100, kd: 20}}
+    reference: {{position: [0.603627, 0.220792, 0.77604], rpy: [1.22292, -0.269738, -1.36996]}}
+  - name: r_gripper_tool_frame_pose
+    type: pose
+    frame: r_gripper_tool_frame
+    priority: 1
+    gains: {{kp: 100, kd: 20}}
+    reference: {{position: [0.603627, -0.220792, 0.77604], rpy: [-1.22292, -0.269738, 1.36996]}}
+  - name: posture
+    type: joint
+    priority: 2
+    gains: {{kp: 10, kd: 6}}
+    reference: {{q: [0.155, 0.785398, 0.43635, 1.55, -1.16065, 0, -1.047, 0, -0.785398, 0.43635, -1.55, -1.16065, 0, -1.047, 0]}}
+""",
 }
 
 
