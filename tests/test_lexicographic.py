@@ -914,13 +914,10 @@ def test_with_a_run_time_activation_the_final_qp_is_solved(name):
 
 def test_a_final_qp_with_a_feasible_point_gets_a_widened_retry(monkeypatch):
     """The first state above with rows of free coefficients ~1e-12 left in DAQP's QP (the old
-    CONSTANT_ROW), and without the stages' certified faces held (which now make it solvable as it
-    is): DAQP fails its final QP, and the retry with the rows widened by 1e-10 solves it."""
+    CONSTANT_ROW): DAQP fails its final QP, and the retry with the rows widened by 1e-10 solves it."""
     from dcts_spec.solve import lexicographic
 
     monkeypatch.setattr(lexicographic, "CONSTANT_ROW", 1e-12)
-    assert abs(_final_objective_gap("activation_final_qp")) <= 1e-9
-    monkeypatch.setattr(lexicographic.Cascade, "_hold_certified", lambda *args: None)
     assert abs(_final_objective_gap("activation_final_qp")) <= 1e-9
     monkeypatch.setattr(lexicographic.FixedEliminated, "widened", lambda qp, relative: qp)
     assert _final_objective_gap("activation_final_qp") > 1e-3
@@ -966,9 +963,7 @@ def test_a_level_met_is_not_left_short_by_the_weighted_qp(monkeypatch):
     lo, hi = lbx.copy(), ubx.copy()
     lo[s] = hi[s] = ubx[s] * (1.0 - 3e-10)
     short = cascade._solve(H, f, lo, hi)
-    # (finish_lowest's own order: the stages, then a scaling within their tolerance of its bound
-    # taken to it; with the bend's face held the stage alone also stops 3e-10 short)
-    answer = cascade._snapped(cascade._scale_and_final(lbx, ubx, short, finished=True), lbx, ubx)
+    answer = cascade._scale_and_final(lbx, ubx, short, finished=True)
     assert answer[s] == ubx[s]
     assert _rel(answer, x) < 1e-12
 
@@ -1024,7 +1019,6 @@ def test_the_lowest_levels_final_qp_holds_the_face_its_scaling_stage_certifies()
     s, _ = structure.priorities[0]
     assert 0.9 < x[s] / ubx[s] < 1.0 and x[s] == pytest.approx(saved["former_c"][s], rel=1e-12)  # (scaled; the same s)
     free = np.setdiff1d(np.arange(x.size), structure.levels_above[-1])
-
     assert _kkt_residual(args, free, x) < 1e-5
     assert _kkt_residual(args, free, saved["former_c"]) > 0.1  # (the check sees a point that is not the optimum)
 
@@ -1042,26 +1036,6 @@ def test_the_optimality_scan_finds_the_bench_specs_answers_optimal():
     checks some, and every final objective is at its KKT point (1.1e-10 at most on 1,995 states)."""
     found = optimality_scan.scan(str(Path(__file__).resolve().parent.parent / "specs" / "bench_iiwa14.yaml"), 20)
     assert len(found) >= 20 and found[0][0] < 1e-8, found[:3]
-
-
-def test_the_stages_after_a_bend_hold_the_face_every_least_bend_has(monkeypatch):
-    """QP data of a closed-loop state of the same Romeo: its top level is bent, and the stages
-    after the bend run on the sliver it leaves. DAQP failed the lowest level's scaling stage and
-    the final QP, and the answer was the bend's point, its posture 10 Nm from the least (KKT
-    residual 0.4; 8 of 289 "ok" states of that spec so). With the rows every least bend has
-    active held (its certificate, as a scaling's), the answer is the final QP's optimum."""
-    from dcts_spec.solve import lexicographic
-
-    args, structure = saved_qp("final_qp_after_a_bend_on_its_face")
-    acceleration_map = np.load(Path(__file__).parent / "data" / "final_qp_after_a_bend_on_its_face.npz")["Q"]
-    free = np.setdiff1d(np.arange(args[0].shape[0]), structure.levels_above[-1])
-    x = solve_lexicographic(*args, structure, acceleration_map)
-    value = args[2] @ x
-    lba, uba = args[5], args[6]
-    assert (np.maximum(lba - value, value - uba) <= 1e-9 * np.maximum(1.0, np.minimum(abs(lba), abs(uba)))).all()
-    assert _kkt_residual(args, free, x) < 1e-5
-    monkeypatch.setattr(lexicographic.Cascade, "_hold_certified", lambda *a: None)  # (the premise)
-    assert _kkt_residual(args, free, solve_lexicographic(*args, structure, acceleration_map)) > 0.1
 
 
 def test_a_scaling_a_hair_from_its_bound_is_the_bound():

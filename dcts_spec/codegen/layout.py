@@ -143,7 +143,6 @@ def workspace_fields(nq: int, nref: int, nx: int, na: int, nlevels: int, casadi_
         ("face_uba", "double", n["na"], ""),
         ("face_rows", "int", n["na"], "the rows it holds as equalities"),
         ("held", "int", n["na"], "the rows held as equalities on scaled levels' optimal faces (ctl_hold_face)"),
-        ("bend_rows", "int", n["na"], "the rows every least bend of the level just bent has active (ctl_levels)"),
         ("center", "double", nx2, "proximal steps"),
         ("direction", "double", nx2, ""),
         ("trial", "double", nx2, ""),

@@ -698,21 +698,15 @@ class Cascade:
                     x = self.finish_lowest(lbx, ubx) if lowest else self.scale(i, lbx, ubx)
                 if x is None:
                     x = self.bend(i, free_lo, free_hi)
-                    certified = None
                     if x is None:  # infeasible: only possible for the first level, else DAQP failed
                         if witness is None:
                             return None
                         # on the sliver the levels above leave (see smallest_bend), whose point
                         # the witness is: its split made the bend's, the levels below solved on
                         x = witness
-                    else:  # the rows every least bend has active, held as a scaling's are
-                        weights = np.zeros(x.size)
-                        weights[bend] = 1.0
-                        certified = self._certified(weights * x)
                     x = self.smallest_bend(i, x, free_lo, free_hi)
                     self._admit(x, lbx, ubx)
                     lbx[bend] = ubx[bend] = x[bend]
-                    self._hold_certified(certified, x, lbx, ubx)
                     # (the bend's solution witnesses a scaling)
                     scaled = self.finish_lowest(lbx, ubx, x) if lowest else self.scale(i, lbx, ubx)
                     x = x if scaled is None else scaled
@@ -749,48 +743,24 @@ class Cascade:
         parted by up to 30 Nm). The rows held so far are held again in the variables left free
         (`_hold_rows`): fixing a level can make some of them constant."""
         s, _ = self.structure.priorities[level]
-        if ubx[s] < self.ubx[s]:
-            self._hold_certified(self._certified(-np.eye(1, ubx.size, s)[0]), witness, lbx, ubx)
-
-    def _certified(self, gradient: np.ndarray) -> np.ndarray | None:
-        """The rows of A (indices) that the last QP's active rows certify active in every minimizer
-        of a convex φ (its `gradient` ∇φ there, over every variable) on that QP's set: `certificate`
-        without the variables' bounds. None if there are none, no certificate, or φ sees no free
-        variable. For a stage's objective (max s; min ‖δ‖², whose minimizers are the points with
-        the least bend), every answer of the stages below is such a minimizer: complementary
-        slackness holds for every pair of primal and dual solutions."""
-        if self._last_qp is None:
-            return None
+        if self._last_qp is None or ubx[s] >= self.ubx[s]:
+            return
         qp, multipliers = self._last_qp
-        if not gradient[qp.free].any():
-            return None
-        rows = certificate(qp, multipliers, gradient)
-        if rows is None:
-            return None
-        rows = rows[rows >= qp.free.size] - qp.free.size
-        return rows if rows.size else None
-
-    def _hold_certified(self, rows: np.ndarray | None, point: np.ndarray, lbx, ubx) -> None:
-        """Those rows held from now on, with the ones held before (`_hold_rows`, at `point`)."""
+        rows = None if s not in qp.free else certificate(qp, multipliers, -np.eye(1, lbx.size, s)[0])
         if rows is None:
             return
+        rows = rows[rows >= qp.free.size] - qp.free.size
+        if not rows.size:
+            return
         self._held[rows] = True
-        self._hold_rows(self._held, point, lbx, ubx)
+        self._hold_rows(self._held, witness, lbx, ubx)
 
     def _hold_rows(self, rows: np.ndarray, point: np.ndarray, lbx, ubx) -> None:
-        """The rows of the mask `rows` as equalities at the bounds they are active at, at `point`
-        (within lbx/ubx; at their values there if they are not within FACE_TOLERANCE of one), but
+        """The rows of the mask `rows` as equalities at their values at `point` (within lbx/ubx), but
         the ones whose coefficients in the free variables are within INDEPENDENT_ROW (relative) of
         the span of those before them (Gram–Schmidt, in row order): on the face they are constant,
-        and they are dropped (no bounds) and cleared from the mask.
-
-        At the bound, not at the value: the face is that of the rows' bounds, and a value a hair
-        inside one (rounding at the point) narrowed it, so that a level's scaling stopped 3e-10
-        short of 1 (a 17-joint iCub's saved state) once a bend's face was held too."""
+        and they are dropped (no bounds) and cleared from the mask."""
         value = self.A @ np.minimum(np.maximum(point, lbx), ubx)  # (at the fixed variables' values)
-        below, above = np.abs(value - self.lba), np.abs(self.uba - value)
-        near = np.minimum(below, above) <= FACE_TOLERANCE * np.maximum(1.0, np.abs(value))
-        value = np.where(near, np.where(below <= above, self.lba, self.uba), value)
         free = lbx != ubx
         basis: list[np.ndarray] = []  # orthonormal, of the rows held so far (in the free variables)
         for i in np.flatnonzero(rows):
