@@ -10,7 +10,7 @@ compiler's peak memory, the C step's median and p99 on closed-loop states, its r
 Pinocchio's computeAllTerms timed in the same run, and the Cortex-M7 flash (when
 arm-none-eabi-gcc is installed).
 
-    python scripts/bench_sizes.py                      # every model (~15 min; the chain alone ~6)
+    python scripts/bench_sizes.py                      # every model (~20 min; the chain alone ~6)
     python scripts/bench_sizes.py iiwa14 chain32       # some of them
     python scripts/bench_sizes.py --out table.md --json sizes.json --states 3000
 """
@@ -56,6 +56,16 @@ MODELS = (
           TALOS_FRAMES),
     Model("talos28", "TALOS, arms, torso and legs", "talos_data/robots/talos_reduced.urdf",
           ("torso_", *TALOS_ARMS, "leg_"), TALOS_FRAMES),
+    # first tried from outside (stop 39): a prismatic torso lift and continuous rolls; a 27-joint
+    # tree whose golden test once failed (docs/formulations.md, the lowest level's certified face)
+    Model("pr2_15", "PR2, torso lift and arms", "pr2_description/urdf/pr2.urdf",
+          ("torso_lift", *(f"{side}{part}" for side in ("l_", "r_") for part in
+                           ("shoulder", "upper_arm", "elbow", "forearm", "wrist_flex", "wrist_roll"))),
+          ("l_gripper_tool_frame", "r_gripper_tool_frame")),
+    Model("romeo27", "Romeo, trunk, arms and legs", "romeo_description/urdf/romeo_small.urdf",
+          ("Trunk", *(f"{side}{part}" for side in "LR" for part in
+                      ("Shoulder", "Elbow", "Wrist", "Hip", "Knee", "Ankle"))),
+          ("l_gripper", "r_gripper")),
 )
 BENCH_SPEC = ROOT / "specs" / "bench_iiwa14.yaml"  # the 7-joint row: `dcts bench`'s own spec
 TORQUE_MARGIN = 2.0

@@ -17,7 +17,7 @@ from dcts_spec.validate import validate_file
 sys.path.insert(0, str(ROOT / "scripts"))
 import bench_sizes  # noqa: E402  (a script, not a package)
 
-DOF = {"baxter14": 14, "talos16": 16, "talos28": 28}
+DOF = {"baxter14": 14, "talos16": 16, "talos28": 28, "pr2_15": 15, "romeo27": 27}
 
 
 @pytest.mark.parametrize("model", bench_sizes.MODELS, ids=lambda m: m.key)
