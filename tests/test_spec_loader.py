@@ -251,7 +251,7 @@ def test_bytes_that_are_not_utf8_are_located(tmp_path: Path) -> None:
 
 @pytest.mark.parametrize(("old", "new", "path", "message"), [
     ("joint_torque: {max: 100}", "joint_torque: {max: 1e308, allow_outside_urdf: true}", ("limits", "joint_torque", "max"),
-     "must be > 0 and ≤ 1e6 Nm, got 1e308"),
+     "must be > 0 and ≤ 1e6 Nm (N for a prismatic joint), got 1e308"),
     ("joint_torque: {max: 100}", "joint_torque: {max: 100}\n  joint_velocity: {max: [1, 1, 1, 1, 1, 1, 1e308]}",
      ("limits", "joint_velocity", "max"), "item 6: must be > 0 and ≤ 1e4, got 1e308"),
     ("kp: [100, 100, 200]", "kp: 1e200", ("tasks", 0, "gains", "kp"), "must be ≥ 0 and ≤ 1e8 1/s², got 1e200"),

@@ -52,7 +52,7 @@ class JointAccelerationLimits(StrictModel):
 class JointTorqueLimits(StrictModel):
     """Joint torque bounds |τ| ≤ max."""
 
-    max: Annotated[ScalarOrVector, Range(0, 1e6, "Nm", open=True)] = Field(description="in Nm (N for a prismatic joint), one value or one per joint",
+    max: Annotated[ScalarOrVector, Range(0, 1e6, "Nm (N for a prismatic joint)", open=True)] = Field(description="in Nm (N for a prismatic joint), one value or one per joint",
                                 examples=[100, [176, 176, 110, 110, 110, 40, 40]])
     unit: Literal["Nm"] = Field("Nm", description="unit of max: Nm", examples=["Nm"])
     allow_outside_urdf: bool = Field(False, description=_ALLOW_OUTSIDE_URDF, examples=[False])
