@@ -15,7 +15,7 @@ from ..controller import Controller
 from ..formulations.parameters import ParameterInput
 from ..parameter_ramp import ramp_steps
 from ..limits.joint import DEFAULT_BRAKING
-from ..limits.naming import interval_text, joint_unit
+from ..limits.naming import interval_text, joint_force_unit, joint_unit
 from ..limits.viability import VELOCITY_MARGIN
 from ..robot.collision import resolve_collision
 from ..robot.resolve import locked_joints
@@ -274,7 +274,7 @@ def _joint_and_cartesian_text(controller: Controller) -> str:
     lines = wrap(f"Limits, compiled ({how}; none: no limit):")
     rows = [["joint", "q min", "q max", "|dq| max", "|ddq| max", "|tau| max"]]
     for j, (name, unit) in enumerate(zip(names, joint_units(controller))):
-        torque = "N" if unit == "m" else "Nm"
+        torque = joint_force_unit(controller.robot, j)
         rows.append([name, _cell(lim.q_min[j], unit), _cell(lim.q_max[j], unit), _cell(lim.v_max[j], f"{unit}/s"),
                      _cell(lim.a_max[j], f"{unit}/s²"), _cell(controller.tau_max[j], torque)])
     lines.append(columns(rows))

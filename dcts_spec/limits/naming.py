@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..robot.collision import CollisionModel
-from ..robot.model import CartesianBound, Robot, is_prismatic
+from ..robot.model import CartesianBound, Robot, is_prismatic, unit_of_kind
 
 
 def interval_text(name: str, lower: float, upper: float, unit: str, digits: int = 4) -> str:
@@ -41,12 +41,12 @@ def joint_bound_text(robot: Robot, j: int) -> str:
 
 def joint_unit(robot: Robot, j: int) -> str:
     """"m" for a prismatic joint, "rad" for a revolute one."""
-    return "m" if is_prismatic(robot.model.joints[j + 1]) else "rad"  # (joint 0 is the universe)
+    return unit_of_kind("rad", is_prismatic(robot.model.joints[j + 1]))  # (joint 0 is the universe)
 
 
 def joint_force_unit(robot: Robot, j: int) -> str:
     """Joint j's torque unit: Nm, or N for a prismatic joint."""
-    return "Nm" if joint_unit(robot, j) == "rad" else "N"
+    return unit_of_kind("Nm", is_prismatic(robot.model.joints[j + 1]))
 
 
 def joint_row_name(joint: str) -> str:

@@ -17,7 +17,7 @@ import pinocchio as pin
 
 from ..spec import load_spec
 from .builtin import BUILTIN_ROBOTS, builtin_locked_joints, builtin_urdf_path, load_builtin_model
-from .model import JointLimits, is_prismatic, multi_dof_kind
+from .model import JointLimits, is_prismatic, multi_dof_kind, unit_of_kind
 from .resolve import captured_stderr, locked_joints, resolve_robot
 from .urdf import build_model
 
@@ -164,7 +164,7 @@ def _description(name: str, source: str, urdf: Path, model: pin.Model, limits: J
     for jid in range(1, model.njoints):
         joint = model.joints[jid]
         kind = "prismatic" if is_prismatic(joint) else "revolute"
-        unit = "m" if kind == "prismatic" else "rad"
+        unit = unit_of_kind("rad", is_prismatic(joint))
         q, v = joint.idx_q, joint.idx_v
         if joint.nv != 1:  # (a floating base: validation asks to lock it)
             none = Limit(None, None, "")
@@ -174,7 +174,7 @@ def _description(name: str, source: str, urdf: Path, model: pin.Model, limits: J
             kind = "continuous"  # (a URDF continuous joint, read as a revolute one: robot/urdf.py)
         position = Limit(_finite(limits.q_min[q]), _finite(limits.q_max[q]), unit)
         joints.append(Joint(model.names[jid], kind, position, Limit(None, _finite(limits.v_max[v]), f"{unit}/s"),
-                            Limit(None, _finite(limits.tau_max[v]), "N" if unit == "m" else "Nm")))
+                            Limit(None, _finite(limits.tau_max[v]), unit_of_kind("Nm", is_prismatic(joint)))))
     frames = [Frame(f.name, FRAME_KINDS.get(f.type, str(f.type)), model.names[f.parentJoint])
               for f in model.frames if f.name != "universe"]
     return RobotDescription(name, source, str(urdf), joints, dict(locked), frames, _links(urdf))

@@ -97,6 +97,14 @@ def is_prismatic(joint: pin.JointModel) -> bool:
     return joint.shortname().removeprefix("JointModel").startswith("P")
 
 
+def unit_of_kind(unit: str, prismatic: bool) -> str:
+    """A revolute joint's unit (rad, rad/s, rad/s², Nm) as the joint's kind has it: m, m/s, m/s² and
+    N for a prismatic joint."""
+    if not prismatic:
+        return unit
+    return "N" if unit == "Nm" else unit.replace("rad", "m")
+
+
 def prismatic_joints(model: pin.Model) -> np.ndarray:
     """Per joint of `model` (the order of q): does it translate?"""
     return np.array([is_prismatic(model.joints[j]) for j in range(1, model.njoints)], dtype=bool)

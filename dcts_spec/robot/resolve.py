@@ -21,7 +21,8 @@ from ..spec.source import SourceMap
 from ..spec.types import as_list, size_of
 from ..spec.units import joint_to_si, to_si
 from .builtin import builtin_locked_joints, builtin_urdf_path, lock_joints
-from .model import CartesianBound, JointLimits, Robot, is_prismatic, multi_dof_kind, no_position_range, prismatic_joints
+from .model import (CartesianBound, JointLimits, Robot, is_prismatic, multi_dof_kind, no_position_range, prismatic_joints,
+                    unit_of_kind)
 from .urdf import load_model, mimic_joints
 
 AXIS_INDEX = {"x": 0, "y": 1, "z": 2}
@@ -156,7 +157,7 @@ def _load_model(spec: Spec, diags: list[Diagnostic]) -> tuple[pin.Model | None, 
             continue
         lo, hi = full.lowerPositionLimit[joint.idx_q], full.upperPositionLimit[joint.idx_q]
         if joint.nq == 1 and lo < hi and not lo - 1e-9 <= value <= hi + 1e-9:
-            unit = "m" if is_prismatic(joint) else "rad"
+            unit = unit_of_kind("rad", is_prismatic(joint))
             diags.append(src.diagnostic(("robot", "locked_joints", name),
                                         f"{value:g} {unit} is outside {name}'s range [{lo:.6g}, {hi:.6g}] {unit} "
                                         f"(a locked joint's position is in {unit})"))
@@ -310,9 +311,7 @@ class _JointUnits:
 
     def value(self, j: int, text: str, unit: str) -> str:
         """`joint 3, <name>: <text> <unit>`, in the unit of the joint's kind (as the gravity warning)."""
-        if self.prismatic[j]:
-            unit = {"Nm": "N"}.get(unit, unit.replace("rad", "m"))
-        return f"joint {j + 1}, {self.names[j]}: {text} {unit}"
+        return f"joint {j + 1}, {self.names[j]}: {text} {unit_of_kind(unit, self.prismatic[j])}"
 
 
 def _vector(
