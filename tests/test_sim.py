@@ -674,6 +674,14 @@ def test_version_names_dcts_and_its_solvers() -> None:
     assert result.output.startswith(f"dcts {version('dcts-spec')} (casadi {version('casadi')}, daqp {version('daqp')}, ")
 
 
+# A UR10's tool pulled toward a target below its floor bound, its orientation and posture below
+# (format templates: the doubled braces are YAML's)
+UR10_FLOOR_TASKS = """tasks:
+  - {{name: tool_pos, type: position, frame: tool0, priority: 1, gains: {{kp: 100, kd: 20}}, reference: {{position: [0.75, 0.35, 0.10]}}}}
+  - {{name: tool_point, type: orientation, frame: tool0, axes: [rx, ry], priority: 2, gains: {{kp: 200, kd: 28}}, reference: {{rpy: [180, 0, 0], unit: deg}}}}
+  - {{name: posture, type: joint, priority: 3, gains: {{kp: 10, kd: 6}}, reference: {{q: [0, -1.2, 1.5, -1.9, -1.57, 0]}}}}
+"""
+
 UR10_TOOL_ON_FLOOR = """version: 1
 name: ur10_tool_on_floor
 robot:
@@ -682,11 +690,7 @@ robot:
   joint_acceleration: {{max: 15}}
   cartesian:
     - {{frame: tool0, axis: z, min: 0.30}}
-tasks:
-  - {{name: tool_pos, type: position, frame: tool0, priority: 1, gains: {{kp: 100, kd: 20}}, reference: {{position: [0.75, 0.35, 0.10]}}}}
-  - {{name: tool_point, type: orientation, frame: tool0, axes: [rx, ry], priority: 2, gains: {{kp: 200, kd: 28}}, reference: {{rpy: [180, 0, 0], unit: deg}}}}
-  - {{name: posture, type: joint, priority: 3, gains: {{kp: 10, kd: 6}}, reference: {{q: [0, -1.2, 1.5, -1.9, -1.57, 0]}}}}
-scenario:
+""" + UR10_FLOOR_TASKS + """scenario:
   duration: 2.5
   initial_q: [0, -1.2, 1.5, -1.9, -1.57, 0]
 {scenario_payload}"""
@@ -728,11 +732,7 @@ limits:
   cartesian:
     - {{frame: tool0, axis: z, min: 0.30}}
 controller: {{formulation: dcts, external_torque: measured}}
-tasks:
-  - {{name: tool_pos, type: position, frame: tool0, priority: 1, gains: {{kp: 100, kd: 20}}, reference: {{position: [0.75, 0.35, 0.10]}}}}
-  - {{name: tool_point, type: orientation, frame: tool0, axes: [rx, ry], priority: 2, gains: {{kp: 200, kd: 28}}, reference: {{rpy: [180, 0, 0], unit: deg}}}}
-  - {{name: posture, type: joint, priority: 3, gains: {{kp: 10, kd: 6}}, reference: {{q: [0, -1.2, 1.5, -1.9, -1.57, 0]}}}}
-scenario:
+""" + UR10_FLOOR_TASKS + """scenario:
   duration: 0.6
   initial_q: [1.37, -0.435, 0.433, -1.621, -1.516, 0]
   initial_dq: [0.288, 1.462, -2.618, -0.04, 1.276, 0]
@@ -814,12 +814,22 @@ scenario: {{duration: 1.3, initial_q: [0, 0.0, 0, -0.5, 0, 1.8, 0.8]}}
     assert torque["max_joint_position_violation"] < 1e-5 and torque["limits_relaxed"] == 0
 
 
+def _compiled_upper_bound(c, joint: str, q: np.ndarray, dq: np.ndarray) -> float:
+    """The upper acceleration bound the controller compiles for `joint`'s row, at (q, dq)."""
+    import casadi as ca
+
+    from dcts_spec.limits.naming import joint_row_name
+
+    p, rows = c.problem, c.problem.acceleration_rows
+    row = rows.names.index(joint_row_name(joint))
+    return float(ca.Function("upper", [p.sym.q, p.sym.dq, p.param], [rows.upper[row]])(q, dq, c.param_layout.defaults))
+
+
 def test_the_braking_the_bounds_assume_is_the_torque_limit_s_in_the_state():
     """The shoulder lift's upper acceleration bound in the compiled controller equals the one the
     shaping gives with the braking computed independently (Pinocchio's CRBA and RNEA: (τ_max + h)/M_jj,
     the other joints still), which is below the acceleration limit in this state; with
     `joint_braking: acceleration_limit` it is the one with 15 rad/s²."""
-    import casadi as ca
     from formulation_cases import joint_acceleration_bounds, joint_braking
 
     from dcts_spec import build_controller
@@ -831,9 +841,7 @@ def test_the_braking_the_bounds_assume_is_the_torque_limit_s_in_the_state():
     for braking in ("torque_limited", "acceleration_limit"):
         c = build_controller(load_spec_text(UR10_SHOULDER_TOWARD_ITS_LIMIT.format(urdf=example_robot_data_dir(),
                                                                                   braking=braking)))
-        p, rows = c.problem, c.problem.acceleration_rows
-        row = rows.names.index(next(name for name in rows.names if "shoulder_lift" in name))
-        compiled = float(ca.Function("upper", [p.sym.q, p.sym.dq, p.param], [rows.upper[row]])(q, dq, c.param_layout.defaults))
+        compiled = _compiled_upper_bound(c, "shoulder_lift_joint", q, dq)
         assert compiled == pytest.approx(joint_acceleration_bounds(c.robot, q, dq, c.problem.period)[1][1], abs=1e-9)
         upper[braking] = compiled
         if braking == "torque_limited":
@@ -852,7 +860,6 @@ def test_a_joint_gravity_pulls_less_and_less_toward_its_bound_counts_on_the_brak
     at the bound needs. The bound the controller compiles counts on that mean, and agrees with the
     independent one (Pinocchio's gravity and its derivative) and with the mean of Pinocchio's
     gravity sampled along the way."""
-    import casadi as ca
     from formulation_cases import BAXTER_TWO_HANDS, joint_acceleration_bounds, joint_braking
 
     from dcts_spec import build_controller
@@ -877,9 +884,7 @@ def test_a_joint_gravity_pulls_less_and_less_toward_its_bound_counts_on_the_brak
     toward_max, _ = joint_braking(c.robot, q, dq, j)
     need = dq[j] ** 2 / (2 * gap)
     assert now < 0.2 * need and toward_max == pytest.approx(sampled, rel=1e-5) and toward_max > 5 * need
-    p, rows = c.problem, c.problem.acceleration_rows
-    row = rows.names.index(next(name for name in rows.names if name.endswith("left_s1")))
-    compiled = float(ca.Function("upper", [p.sym.q, p.sym.dq, p.param], [rows.upper[row]])(q, dq, c.param_layout.defaults))
+    compiled = _compiled_upper_bound(c, "left_s1", q, dq)
     assert compiled == pytest.approx(joint_acceleration_bounds(c.robot, q, dq, c.problem.period)[1][j], abs=1e-9)
     assert compiled > -dq[j] / c.problem.period  # (no demand to stop within the step: the state is viable)
 
