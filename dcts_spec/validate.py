@@ -202,8 +202,11 @@ def _check_cartesian_bounds(spec: Spec, robot: Robot, q0: np.ndarray) -> list[Di
             if task.frame == b.frame and not b.c_min <= target <= b.c_max:
                 # (a level's tasks share its scaling: a bounded foot stopped the other feet of its level)
                 peers = [t.name for t in spec.tasks if t.priority == task.priority and t.name != task.name]
-                shared = (f"; {', '.join(peers)}, at the same priority, share that scaling and are no longer "
-                          "driven either: give them a priority of their own to keep them tracking") if peers else ""
+                one = len(peers) == 1
+                shared = (f"; {', '.join(peers)}, at the same priority, {'shares' if one else 'share'} that scaling "
+                          f"and {'is' if one else 'are'} no longer driven either: give {'it' if one else 'them'} a "
+                          f"priority of {'its' if one else 'their'} own to keep {'it' if one else 'them'} tracking"
+                          ) if peers else ""
                 diags.append(spec.source.diagnostic(
                     at, f"{what} puts {b.frame}.{b.label} at {target:.4g} m, outside its bound {text} "
                         f"(limits.cartesian[{i}]): at the bound its scaling falls to 0 (direction kept), so it stops "

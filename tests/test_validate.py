@@ -607,4 +607,12 @@ def test_a_target_beyond_a_bound_names_the_tasks_that_share_its_scaling(tmp_path
         "  - {name: wrist, type: joint, joints: [joint7], priority: 1, gains: {kp: 10, kd: 6}, reference: {q: [0.2]}}\n"
         "  - {name: posture, type: joint, priority: 2, gains: {kp: 0, kd: 6}}\n")
     warning = next(d.message for d in validate_file(spec).diagnostics if "outside its bound" in d.message)
-    assert "wrist, at the same priority, share that scaling" in warning and "posture" not in warning
+    assert "wrist, at the same priority, shares that scaling and is no longer driven either: give it a " \
+        "priority of its own" in warning and "posture" not in warning
+    # (two of them: the plural, as a 17-joint G1's two hands at one priority read "left_hand ... share")
+    spec.write_text(spec.read_text().replace(
+        "  - {name: posture",
+        "  - {name: elbow, type: joint, joints: [joint4], priority: 1, gains: {kp: 10, kd: 6}, reference: {q: [-1]}}\n"
+        "  - {name: posture"))
+    warning = next(d.message for d in validate_file(spec).diagnostics if "outside its bound" in d.message)
+    assert "wrist, elbow, at the same priority, share that scaling and are no longer driven either: give them" in warning
