@@ -25,7 +25,7 @@ from .formulations.parameters import ParameterLayout
 from .formulations.qp import BOUNDS
 from .parameter_ramp import ParameterRamp, ramp_steps
 from .robot.model import Robot
-from .solve import Structure, check_bounds, rounding_spread, solve_lexicographic, unbounded_solution
+from .solve import Structure, check_bounds, final_optimal, rounding_spread, solve_lexicographic, unbounded_solution
 from .spec import Spec, SpecError, load_spec
 from .symbolic.linalg import looped_products
 from .tasks import ReferenceInput
@@ -76,6 +76,9 @@ class StepResult:
     status: int  # STATUS_* code; negative means the fallback torque was applied
     x: np.ndarray  # the QP solution, in scaled variables (empty for closed forms)
     relaxed: list[str] = field(default_factory=list)  # bounds crossed (status 1), in row order
+    # status "ok" with a QP: is the lowest level's objective (½xᵀHx + fᵀx) at its optimum given
+    # the levels above, checked at x (solve/optimality.py)? None where not checked
+    optimal: bool | None = None
 
     @property
     def ok(self) -> bool:
@@ -396,19 +399,21 @@ class Controller:
         out_of_limits = self.law.enforces_torque_limits and (np.abs(tau) > tau_max + tolerance).any()
         if not np.isfinite(tau).all() or out_of_limits:
             return self._fallback(q, dq, STATUS_INVALID_OUTPUT, x)
-        status, relaxed = STATUS_OK, []
+        status, relaxed, optimal = STATUS_OK, [], None
         if self.nx:
             check = check_bounds(self._structure.bound_rows, data["A"], data["lba"].ravel(), data["uba"].ravel(), x)
             crossed = set(check.violated) | set(np.flatnonzero(data["excess"].ravel() > STATE_TOLERANCE).tolist())
             if crossed:
                 names = self.bound_names
                 status, relaxed = STATUS_LIMITS_RELAXED, [names[i] for i in sorted(crossed)]
+            else:  # (relaxed, the answer is on widened bounds the data do not have)
+                optimal = final_optimal(*self._qp(data), x, self._structure)
         ddq = data["ddq0"].ravel() + data["Q"] @ x
         # (np.minimum/np.maximum: np.clip's numbers, without its Python-level overhead)
         scaling = np.minimum(np.maximum(data["s0"].ravel() + data["S"] @ x, 0.0), 1.0)
         if self.law.least_squares_task is not None:
             scaling[-1] = self._least_squares_scaling(data, x)
-        return StepResult(np.minimum(np.maximum(tau, -tau_max), tau_max), ddq, scaling, status, x, relaxed)
+        return StepResult(np.minimum(np.maximum(tau, -tau_max), tau_max), ddq, scaling, status, x, relaxed, optimal)
 
 
 def build_controller(spec: Spec | str | Path, formulation: str | None = None) -> Controller:

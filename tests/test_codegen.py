@@ -163,6 +163,40 @@ def test_golden_vectors_replay(built):
     assert "heap: none (malloc, calloc, realloc and free abort)" in done.stdout
 
 
+def _optimal_flags_agree(out: Path, compiled, spec_path: Path) -> tuple[int, int]:
+    """Step the bundle through its golden states; at each "ok" one, the C runtime's `optimal`
+    (ctl_final_optimal) against solve.final_optimal on the C's own answer and the Python QP data.
+    Returns (checked, off the optimum); asserts they agree."""
+    from dcts_spec.solve import final_optimal
+
+    controller = dcts_spec.build_controller(spec_path)
+    checked = off = 0
+    for v in json.loads((out / "golden.json").read_text())["vectors"]:
+        q, dq, tau_ext = (np.array(v[k], dtype=float) for k in ("q", "dq", "tau_ext"))
+        ref = np.array(v["ref"], dtype=float) if controller.ref_size else None
+        result = compiled.step(q, dq, tau_ext, ref)
+        if result.status != STATUS_OK:
+            assert result.optimal is None
+            continue
+        data = controller.evaluate_data(q, dq, tau_ext, ref)
+        args = (data["H"], data["f"].ravel(), data["A"], data["lbx"].ravel(), data["ubx"].ravel(),
+                data["lba"].ravel(), data["uba"].ravel())
+        assert result.optimal == final_optimal(*args, result.x, controller._structure), v
+        checked += 1
+        off += not result.optimal
+    return checked, off
+
+
+def test_the_c_checks_the_lowest_levels_optimum_as_python_does(built, three_levels_spec):
+    """`info.optimal` (StepResult.optimal through the bundle): the same check as the Python
+    runtime's, on the C's answer, at every "ok" golden state; not checked on a fallback."""
+    out, compiled = built
+    checked, off = _optimal_flags_agree(out, compiled, three_levels_spec)
+    assert checked >= 20 and off == 0, (checked, off)
+    result = compiled.step(np.full(7, np.nan), np.zeros(7), np.zeros(7), np.zeros(compiled.ref_size))
+    assert result.status < 0 and result.optimal is None
+
+
 def test_nomalloc_catches_a_heap_call(built, tmp_path):
     """`make nomalloc` is a real check: a malloc in init aborts the test."""
     copy = tmp_path / "bundle"
@@ -1470,6 +1504,12 @@ def test_unseen_robots_pass_their_golden_test(name, tmp_path):
     summary = report.manifest["host"]["test_summary"]
     assert report.manifest["built"] and f"{report.manifest['golden']['count']} golden vectors (" in summary
     assert not report.notes, report.notes  # (both paths of the step compared: golden_coverage)
+    compiled = load_bundle(tmp_path / "bundle")
+    try:  # (Romeo's include answers off the optimum: the check's other outcome, in C)
+        checked, _ = _optimal_flags_agree(tmp_path / "bundle", compiled, spec)
+    finally:
+        compiled.close()
+    assert checked >= 1
 
 
 @EXTENDED

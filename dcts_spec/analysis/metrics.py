@@ -26,6 +26,10 @@ applied then, ramps included):
   each joint/Cartesian bound that gave way (keyed by its row name), the bound as validate words it,
   its number of steps and the first and last time; for a joint also `beyond`, which of its limits
   (position, velocity) its state was beyond in those steps and by how much at most
+- lowest_level_off_optimum_steps = #{k: status_k = 0 and the answer does not minimize the lowest
+  level's objective (½xᵀHx + fᵀx: acceleration energy, least-squares posture) given the levels
+  above}: the KKT check of every "ok" step's answer in either runtime (solve/optimality.py,
+  StepResult.optimal; the log's `optimal`: 1, 0, −1 not checked)
 - min_scaling = min over samples and levels of the task scalings; min_scaling_at: the first sample
   and the highest level where it occurs (priority, its tasks, time), None if no level ever scaled;
   min_scaling_by_priority[p] = min over samples of level p's scaling (min_scaling_at may name a
@@ -148,6 +152,7 @@ def summarize(log: SimulationLog, series: TimeSeries, robot: Robot, priorities: 
         "joint_acceleration_limits": bool(np.isfinite(lim.a_max).any()),
         "solver_failures": int(np.count_nonzero(log.status < 0)),
         "limits_relaxed": int(np.count_nonzero(log.status == STATUS_LIMITS_RELAXED)),
+        "lowest_level_off_optimum_steps": int(np.count_nonzero(log.optimal == 0)),
         "crossed_after_ok_steps": int(crossed.size),
         "crossed_after_ok_first": float(log.time[crossed[0]]) if crossed.size else None,
         "relaxed_bounds": _relaxed_bounds(log, series, robot, collision, position_excess, velocity_excess),

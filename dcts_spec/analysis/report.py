@@ -79,6 +79,10 @@ def describe(run: RunResult) -> str:
                f"joint and Cartesian bounds not checked ({s['formulation']} is a closed form: its torque is clipped, "
                "its bounds are not rows; see the worst excess above)")
     lines.append(f"  solver     {s['solver_failures']} failures, {relaxed}, min scaling {min_scaling_text(s)}")
+    if s.get("lowest_level_off_optimum_steps"):
+        lines.append(f"  optimum    {s['lowest_level_off_optimum_steps']} \"ok\" steps whose answer does not minimize "
+                     "the lowest level's objective given the levels above (the KKT check of each answer; the "
+                     "bounds and the levels above are not affected)")
     if s.get("crossed_after_ok_steps"):
         causes = "a payload it does not know: robot.payloads; τ_ext one step late; a mass mismatch"
         if not s["joint_acceleration_limits"]:

@@ -32,6 +32,7 @@ FIXED_UNITS: dict[str, str] = {
     "solver_failures": "steps",
     "limits_relaxed": "steps",
     "crossed_after_ok_steps": "steps",
+    "lowest_level_off_optimum_steps": "steps",
     "crossed_after_ok_first": "s",
     "min_scaling": "1",
     "acceleration_energy_integral": "J/s",  # ∫ ½(τ−g)ᵀM⁻¹(τ−g) dt, ½(τ−g)ᵀM⁻¹(τ−g) in J/s²

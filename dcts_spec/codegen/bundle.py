@@ -27,7 +27,7 @@ from ..formulations import fallback
 from ..formulations.qp import BOUNDS, HARD
 from ..parameter_ramp import ramp_steps
 from ..solve import BOUND_TOLERANCE, DAQP_SETTINGS
-from ..solve import lexicographic
+from ..solve import lexicographic, optimality
 from ..spec import Spec
 from ..spec.loader import recorded_bytes
 from .layout import (C_DATA_OUTPUTS, array_lengths, casadi_work_lengths, daqp_storage, header_fields, workspace_fields,
@@ -657,6 +657,10 @@ def generate_sources(
         "CONSTANT_ROW": c_double(lexicographic.CONSTANT_ROW),
         "FACE_TOLERANCE": c_double(lexicographic.FACE_TOLERANCE),
         "INDEPENDENT_ROW": c_double(lexicographic.INDEPENDENT_ROW),
+        "OPT_ACTIVE": c_double(optimality.ACTIVE),
+        "OPT_TOLERANCE": c_double(optimality.OPTIMALITY_TOLERANCE),
+        "OPT_INDEPENDENT": c_double(optimality.INDEPENDENT),
+        "OPT_ALIGNED": c_double(optimality.ALIGNED),
         "FINISH_WEIGHTS": ", ".join(c_double(w) for w in lexicographic.FINISH_WEIGHTS),
         "MAX_STAGE_SOLVES": lexicographic.PROXIMAL_ITERATIONS,
         "VELOCITY_CAP": f"{fallback.VELOCITY_CAP:g}",

@@ -84,6 +84,7 @@ def info_struct(nq: int, nlevels: int, nx: int, nr: int) -> type[ctypes.Structur
             ("solves", ctypes.c_int),
             ("iterations", ctypes.c_int),
             ("exitflag", ctypes.c_int),
+            ("optimal", ctypes.c_int),
         ]
 
     return Info
@@ -153,6 +154,19 @@ def workspace_fields(nq: int, nref: int, nx: int, na: int, nlevels: int, casadi_
         ("kkt_mu", "double", nx2, ""),
         ("kkt_g", "double", nx2, ""),
         ("kkt_active", "int", nx2, ""),
+        ("opt_count", "int", 0, "the answer's optimality (ctl_final_optimal): how many normals are active"),
+        ("opt_index", "int", 2 * nc, "each one's row (or C_NA + free variable)"),
+        ("opt_scale", "double", 2 * nc, "and sign / norm"),
+        ("opt_mu", "double", 2 * nc, "Lawson-Hanson's coefficients"),
+        ("opt_passive", "int", 2 * nc, ""),
+        ("opt_passed", "int", 2 * nc, ""),
+        ("opt_list", "int", nxa, "the passive ones, in order"),
+        ("opt_z", "double", nxa, ""),
+        ("opt_qr", "double", nxa * nxa, ""),
+        ("opt_rhs", "double", nxa, ""),
+        ("opt_g", "double", nxa, ""),
+        ("opt_residual", "double", nxa, ""),
+        ("opt_column", "double", nxa, ""),
         ("lo", "double", nc, "DAQP's arrays of the QP (its H is the QP data's; f: theirs or finish_lowest's)"),
         ("hi", "double", nc, ""),
         ("sense", "int", nc, ""),

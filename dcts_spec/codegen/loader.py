@@ -223,7 +223,7 @@ class CompiledController:
         The arrays of the result are new (later steps do not change them)."""
         status = self._call(q, dq, tau_ext, ref)
         return StepResult(self._tau.copy(), self._ddq_out.copy(), self._scaling_out.copy(), int(status),
-                          self._solution(status), self.last_relaxed())
+                          self._solution(status), self.last_relaxed(), self.last_optimal())
 
     def step_into(self, q, dq, tau_ext, ref, tau: np.ndarray, ddq: np.ndarray | None = None,
                   scaling: np.ndarray | None = None) -> int:
@@ -243,6 +243,11 @@ class CompiledController:
         if self._info.status != STATUS_LIMITS_RELAXED:
             return []
         return [name for name, flag in zip(self.bound_names, self._info.relaxed) if flag]
+
+    def last_optimal(self) -> bool | None:
+        """Whether the last step's answer was checked to minimize the lowest level's objective, as
+        `StepResult.optimal` (None where not checked)."""
+        return None if self._info.optimal < 0 else bool(self._info.optimal)
 
     def last_x(self) -> np.ndarray:
         """The QP solution of the last step, as `StepResult.x` (a copy)."""

@@ -32,6 +32,9 @@ class SimulationLog:
     status: np.ndarray
     relaxed: np.ndarray  # (steps, bounds): the joint/Cartesian bounds crossed (status 1)
     bound_names: list[str] = field(default_factory=list)  # the columns of `relaxed`
+    # status "ok" with a QP: 1 if the answer was checked to minimize the lowest level's objective
+    # given the levels above (StepResult.optimal), 0 if not; −1 where not checked
+    optimal: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int8))
     # (steps, run-time parameters): the values the controller applied at each step (ramps included)
     param: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
     waypoint_times: np.ndarray = field(default_factory=lambda: np.zeros(0))  # NaN where not reached
@@ -49,7 +52,7 @@ class SimulationLog:
             time=np.arange(steps) * period,
             q=zeros(n), dq=zeros(n), ddq=zeros(n), ddq_commanded=zeros(n), tau=zeros(n),
             tau_ext_true=zeros(n), tau_ext_measured=zeros(n), ref=zeros(ref_size), scaling=zeros(levels),
-            status=np.zeros(steps, dtype=np.int8),
+            status=np.zeros(steps, dtype=np.int8), optimal=np.full(steps, -1, dtype=np.int8),
             relaxed=np.zeros((steps, len(bound_names)), dtype=bool), bound_names=list(bound_names),
             param=zeros(param_size),
         )

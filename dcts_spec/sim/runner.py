@@ -101,7 +101,7 @@ class Simulation:
         # Locals: attribute look-ups cost as much as the small numpy operations here.
         q, dq, ddq, tau, ddq_cmd = log.q, log.dq, log.ddq, log.tau, log.ddq_commanded
         tau_true, tau_meas, refs, times = log.tau_ext_true, log.tau_ext_measured, log.ref, log.time
-        scaling, status = log.scaling, log.status
+        scaling, status, optimal = log.scaling, log.status, log.optimal
         substep_tau = np.zeros(n)  # a later substep's τ_ext, summed into the period's
         step, mj_step, ctrl = self.runtime.step, mujoco.mj_step, d.ctrl
         # The C runtime writes its outputs straight into the log (no result objects per step).
@@ -137,6 +137,7 @@ class Simulation:
                     ctrl[:] = tau[k]
                     if status[k] == STATUS_LIMITS_RELAXED:
                         _mark(log, k, self.runtime.last_relaxed())
+                    optimal[k] = _flag(self.runtime.last_optimal())
                 else:
                     result = step(q[k], dq[k], tau_meas[k], ref)
                     ctrl[:] = tau[k] = result.tau
@@ -144,6 +145,7 @@ class Simulation:
                     scaling[k] = result.scaling
                     status[k] = result.status
                     _mark(log, k, result.relaxed)
+                    optimal[k] = _flag(result.optimal)
                 # τ_ext of the period is the mean of its substeps' (the impulse over T, what the motion
                 # and the motion-based estimate see): a push starting or ending mid-period counts.
                 for s in range(substeps):
@@ -200,6 +202,11 @@ def prepare_simulation(spec: Spec | str | Path, runtime: str = "python", formula
     rt = make_runtime(spec, runtime, formulation, robot=controller_robot, work_dir=work_dir, cache=cache,
                       model_changes=changes)
     return Simulation(spec, report.robot, scenario, rt, controller_robot, runtime, formulation)
+
+
+def _flag(optimal: bool | None) -> int:
+    """StepResult.optimal as the log keeps it: 1, 0, or −1 where not checked."""
+    return -1 if optimal is None else int(optimal)
 
 
 def _mark(log: SimulationLog, k: int, relaxed: list[str]) -> None:
