@@ -129,9 +129,13 @@ def test_summary_definitions(case) -> None:
     log.ddq_commanded[15, 6] = -321.0
     log.scaling[11] = [1.0, 0.4, 0.0]
     log.status[[12, 13]] = [-2, 1]
+    log.optimal[:] = 1
+    log.optimal[[12, 13]] = -1  # (not checked: a fallback and a relaxed step)
+    log.optimal[[17, 18]] = 0  # two "ok" answers off the lowest level's optimum
     log.wall_time = 0.04
     series = evaluate(spec, robot, log)
     summary = summarize(log, series, robot, [1, 2, 3])
+    assert summary["lowest_level_off_optimum_steps"] == 2
     assert summary["max_joint_position_violation"] == pytest.approx(0.25)
     assert summary["max_joint_velocity_violation"] == pytest.approx(0.5)
     assert summary["max_joint_velocity_violation_ratio"] == pytest.approx(0.5)
@@ -397,6 +401,28 @@ def test_printed_summary_carries_units(case) -> None:
     assert s["relaxed_bounds"]["cartesian:tool.z"] == {"bound": "0.3 m ≤ tool.z", "steps": 3,
                                                       "first": pytest.approx(0.01), "last": pytest.approx(0.018)}
     assert "relaxed    0.3 m ≤ tool.z: 3 steps between t = 0.01 s and 0.018 s" in text
+
+
+def test_ok_steps_off_the_lowest_levels_optimum_are_said(case) -> None:
+    """The printed summary says how many "ok" answers the optimality check found off the lowest
+    level's optimum (StepResult.optimal), and says nothing when there are none."""
+    _, _, log, _ = case
+    optimal = np.ones(log.steps, dtype=np.int8)
+    run, _ = _summary(case, optimal=optimal)
+    assert run.summary["lowest_level_off_optimum_steps"] == 0 and "optimum" not in describe(run)
+    optimal[[3, 4, 9]] = 0
+    run, _ = _summary(case, optimal=optimal)
+    assert ('optimum    3 "ok" steps whose answer does not minimize the lowest level\'s objective given the '
+            "levels above") in describe(run)
+
+
+def test_a_scaling_just_below_one_is_not_printed_as_one(case) -> None:
+    """A level scaled to 0.99996 read "min scaling 1 (priority 1: …)" (a 27-joint Romeo)."""
+    _, _, log, _ = case
+    scaling = np.ones_like(log.scaling)
+    scaling[7, 0] = 0.99996
+    run, _ = _summary(case, scaling=scaling)
+    assert "min scaling 1 − 4e-05 (priority 1: reach, at t = 0.014 s)" in describe(run)
 
 
 def test_a_relaxed_joint_says_which_of_its_limits_its_state_was_beyond(case) -> None:

@@ -43,12 +43,14 @@ def share_of_limit(run: RunResult, key: str) -> str:
 
 
 def min_scaling_text(summary: dict[str, Any]) -> str:
-    """`0.42 (priority 2: posture, at t = 1.234 s)` or `1 (never scaled)`."""
+    """`0.42 (priority 2: posture, at t = 1.234 s)`, `1 − 4e-05 (…)` (not "1" for a scaling that
+    rounds to it) or `1 (never scaled)`."""
     at = summary.get("min_scaling_at")
+    value = summary["min_scaling"]
     if at is None:
-        return f"{summary['min_scaling']:.3g} (never scaled)"
-    tasks = ", ".join(at["tasks"])
-    return f"{summary['min_scaling']:.3g} (priority {at['priority']}: {tasks}, at t = {at['time']:.4g} s)"
+        return f"{value:.3g} (never scaled)"
+    text = f"{value:.3g}" if f"{value:.3g}" != "1" else f"1 − {1.0 - value:.2g}"
+    return f"{text} (priority {at['priority']}: {', '.join(at['tasks'])}, at t = {at['time']:.4g} s)"
 
 
 def describe(run: RunResult) -> str:
