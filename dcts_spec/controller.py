@@ -25,7 +25,7 @@ from .formulations.parameters import ParameterLayout
 from .formulations.qp import BOUNDS
 from .parameter_ramp import ParameterRamp, ramp_steps
 from .robot.model import Robot
-from .solve import Structure, check_bounds, final_optimal, rounding_spread, solve_lexicographic, unbounded_solution
+from .solve import Structure, check_bounds, rounding_spread, solve_lexicographic, to_optimum, unbounded_solution
 from .spec import Spec, SpecError, load_spec
 from .symbolic.linalg import looped_products
 from .tasks import ReferenceInput
@@ -393,12 +393,6 @@ class Controller:
             if solution is None:
                 return self._fallback(q, dq, STATUS_SOLVER_FAILED, np.zeros(0))
             x = solution
-        tau = data["tau0"].ravel() + data["T"] @ x
-        tau_max = self.torque_limit(param)
-        tolerance = TORQUE_TOLERANCE * np.maximum(1.0, np.where(np.isfinite(tau_max), tau_max, 1.0))
-        out_of_limits = self.law.enforces_torque_limits and (np.abs(tau) > tau_max + tolerance).any()
-        if not np.isfinite(tau).all() or out_of_limits:
-            return self._fallback(q, dq, STATUS_INVALID_OUTPUT, x)
         status, relaxed, optimal = STATUS_OK, [], None
         if self.nx:
             check = check_bounds(self._structure.bound_rows, data["A"], data["lba"].ravel(), data["uba"].ravel(), x)
@@ -407,7 +401,15 @@ class Controller:
                 names = self.bound_names
                 status, relaxed = STATUS_LIMITS_RELAXED, [names[i] for i in sorted(crossed)]
             else:  # (relaxed, the answer is on widened bounds the data do not have)
-                optimal = final_optimal(*self._qp(data), x, self._structure)
+                # the lowest level's optimum, checked, and reached where the cascade's last QP
+                # missed it (solve/optimality.py); within the same rows, the levels held
+                x, optimal = to_optimum(*self._qp(data), x, self._structure)
+        tau = data["tau0"].ravel() + data["T"] @ x
+        tau_max = self.torque_limit(param)
+        tolerance = TORQUE_TOLERANCE * np.maximum(1.0, np.where(np.isfinite(tau_max), tau_max, 1.0))
+        out_of_limits = self.law.enforces_torque_limits and (np.abs(tau) > tau_max + tolerance).any()
+        if not np.isfinite(tau).all() or out_of_limits:
+            return self._fallback(q, dq, STATUS_INVALID_OUTPUT, x)
         ddq = data["ddq0"].ravel() + data["Q"] @ x
         # (np.minimum/np.maximum: np.clip's numbers, without its Python-level overhead)
         scaling = np.minimum(np.maximum(data["s0"].ravel() + data["S"] @ x, 0.0), 1.0)

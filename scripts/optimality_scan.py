@@ -23,15 +23,16 @@ from scipy.optimize import nnls
 import dcts_spec
 from dcts_spec.codegen.states import StateSampler, trajectory_states
 
-ACTIVE = 1e-9  # a row is active within this much of a bound, relative to max(1, |bound|)
+ACTIVE = 1e-9  # a row is active within this much of a bound (relative to max(1, |bound|)), or beyond it
 
 
 def kkt_residual(H, f, A, lba, uba, free: np.ndarray, point: np.ndarray) -> tuple[float, float]:
     """(min ‖∇ + Σ μ n‖ over μ ≥ 0, ‖∇‖): ∇ the gradient of ½xᵀHx + fᵀx over the `free`
     variables at `point`, n the outward normals of the rows active there."""
     gradient, value = (H @ point + f)[free], A @ point
-    low = np.abs(value - lba) <= ACTIVE * np.maximum(1.0, np.abs(lba))
-    high = np.abs(value - uba) <= ACTIVE * np.maximum(1.0, np.abs(uba))
+    # (or beyond it: an answer may cross a row by its check's tolerance, and is then at it)
+    low = value - lba <= ACTIVE * np.maximum(1.0, np.abs(lba))
+    high = uba - value <= ACTIVE * np.maximum(1.0, np.abs(uba))
     normals = np.vstack([-A[low][:, free], A[high][:, free]]).T
     residual = nnls(normals, -gradient)[1] if normals.size else float(np.linalg.norm(gradient))
     return float(residual), float(np.linalg.norm(gradient))

@@ -28,8 +28,9 @@ applied then, ramps included):
   (position, velocity) its state was beyond in those steps and by how much at most
 - lowest_level_off_optimum_steps = #{k: status_k = 0 and the answer does not minimize the lowest
   level's objective (½xᵀHx + fᵀx: acceleration energy, least-squares posture) given the levels
-  above}: the KKT check of every "ok" step's answer in either runtime (solve/optimality.py,
-  StepResult.optimal; the log's `optimal`: 1, 0, −1 not checked)
+  above, even after the step that takes a missed optimum to it}: the KKT check of every "ok"
+  step's answer in either runtime (solve/optimality.py, StepResult.optimal; the log's `optimal`:
+  1, 0, −1 not checked)
 - min_scaling = min over samples and levels of the task scalings; min_scaling_at: the first sample
   and the highest level where it occurs (priority, its tasks, time), None if no level ever scaled;
   min_scaling_by_priority[p] = min over samples of level p's scaling (min_scaling_at may name a

@@ -661,6 +661,8 @@ def generate_sources(
         "OPT_TOLERANCE": c_double(optimality.OPTIMALITY_TOLERANCE),
         "OPT_INDEPENDENT": c_double(optimality.INDEPENDENT),
         "OPT_ALIGNED": c_double(optimality.ALIGNED),
+        "POLISH_STEPS": optimality.POLISH_STEPS,
+        "SMALL_STEP": c_double(optimality.SMALL_STEP),
         "FINISH_WEIGHTS": ", ".join(c_double(w) for w in lexicographic.FINISH_WEIGHTS),
         "MAX_STAGE_SOLVES": lexicographic.PROXIMAL_ITERATIONS,
         "VELOCITY_CAP": f"{fallback.VELOCITY_CAP:g}",

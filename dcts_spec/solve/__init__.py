@@ -9,8 +9,8 @@ from .lexicographic import (
     solve_lexicographic,
     unbounded_solution,
 )
-from .optimality import final_optimal
+from .optimality import final_optimal, to_optimum
 from .sensitivity import rounding_spread
 
 __all__ = ["BOUND_TOLERANCE", "DAQP_SETTINGS", "BoundCheck", "Structure", "check_bounds", "final_optimal", "rounding_spread",
-           "solve_lexicographic", "unbounded_solution"]
+           "solve_lexicographic", "to_optimum", "unbounded_solution"]

@@ -16,7 +16,8 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
-from .lexicographic import Structure, solve_lexicographic
+from .lexicographic import Structure, check_bounds, solve_lexicographic
+from .optimality import to_optimum
 
 ROUNDING = 1e-14  # relative change of each entry of the QP data, about what separates the runtimes
 
@@ -43,11 +44,14 @@ def rounding_spread(H, f, A, lbx, ubx, lba, uba, structure: Structure, x: np.nda
     for _ in range(samples):
         E = ROUNDING * rng.standard_normal(H.shape)
         variables, rows = _changed(np.ones(lbx.size), rng), _changed(np.ones(lba.size), rng)
-        changed = solve_lexicographic(H * (1.0 + 0.5 * (E + E.T)), _changed(f, rng), _changed(A, rng),
-                                      lbx * variables, ubx * variables, lba * rows, uba * rows, structure,
+        data = (H * (1.0 + 0.5 * (E + E.T)), _changed(f, rng), _changed(A, rng), lbx * variables, ubx * variables,
+                lba * rows, uba * rows)
+        changed = solve_lexicographic(*data, structure,
                                       None if acceleration_map is None else _changed(acceleration_map, rng))
         if changed is None:
             return np.full(len(reference), np.inf)
+        if check_bounds(structure.bound_rows, data[2], data[5], data[6], changed).holds:
+            changed, _ = to_optimum(*data, changed, structure)  # (as the step takes an "ok" answer)
         for i, (group, value, scale) in enumerate(zip(outputs(changed), reference, scales)):
             if group.size:
                 spread[i] = max(spread[i], float(np.max(np.abs(group - value) / scale)))
