@@ -117,7 +117,9 @@ class _Constraints:
 
     @classmethod
     def of(cls, A, lbx, ubx, lba, uba, structure: Structure) -> _Constraints:
-        free = np.setdiff1d(np.arange(lbx.size), structure.levels_above[-1])
+        owned = np.zeros(lbx.size, dtype=bool)
+        owned[structure.levels_above[-1]] = True
+        free = np.flatnonzero(~owned)
         rows = np.vstack([A[:, free], np.eye(free.size)])
         size = np.sqrt(np.einsum("ij,ij->i", rows, rows))
         # a row that sees no free variable but through rounding (as the cascade's `constant_rows`)
@@ -179,12 +181,16 @@ def to_optimum(H: np.ndarray, f: np.ndarray, A: np.ndarray, lbx: np.ndarray, ubx
     c = _Constraints.of(A, lbx, ubx, lba, uba, structure)
     if not c.free.size:
         return x, True
+    kkt = _stationarity(H, f, A, c, x)
+    if kkt.optimal:  # (the usual case: the cascade's answer)
+        return x, True
     H_free = H[np.ix_(c.free, c.free)]
     x = x.copy()
-    for _ in range(POLISH_STEPS):
-        kkt = _stationarity(H, f, A, c, x)
-        if kkt.optimal:
-            return x, True
+    for step in range(POLISH_STEPS):
+        if step:
+            kkt = _stationarity(H, f, A, c, x)
+            if kkt.optimal:
+                return x, True
         gradient = (H @ x + f)[c.free]
         d, step = _newton_on_face(H_free, gradient, kkt), 1.0
         if d is None:
