@@ -1,13 +1,13 @@
 """The lowest level's optimality, checked from outside the solver.
 
-Every answer of the lexicographic solve is checked against its rows in both runtimes, but the
-final QP's optimum (½xᵀHx + fᵀx over what the levels leave free) is DAQP's word. This script
-checks it on a spec's states: for every "ok" step of the Python runtime, on closed-loop and
-random states, the KKT residual of that objective at the answer, with the levels' variables held
-at the answer's values: the gradient over the free variables fitted by a nonnegative combination
-of the outward normals of the rows active there (NNLS), relative to the gradient's scale
-(max(1, ‖(Hx)_free‖, ‖f_free‖)). An optimum has ~1e-10; docs/formulations.md ("The lowest
-level's final QP on the face its scaling stage certifies") has what it found.
+Both runtimes check the final objective's optimum (½xᵀHx + fᵀx over what the levels leave free)
+at every "ok" answer, and reach it where the cascade missed it (dcts_spec/solve/optimality.py).
+This script is the independent check of that, with scipy's NNLS and its own active set: for
+every "ok" step of the Python runtime, on closed-loop and random states, the KKT residual of
+that objective at the answer, with the levels' variables held at the answer's values: the
+gradient over the free variables fitted by a nonnegative combination of the outward normals of
+the rows active there (NNLS), relative to the gradient's scale (max(1, ‖(Hx)_free‖, ‖f_free‖)). An optimum has ~1e-10; docs/formulations.md ("The lowest
+level's optimum, checked at the answer and reached from it") has what it found.
 
     python scripts/optimality_scan.py specs/bench_iiwa14.yaml             # 300 + 300 states
     python scripts/optimality_scan.py SPEC --states 1000 --worst 10
