@@ -186,17 +186,17 @@ def to_optimum(H: np.ndarray, f: np.ndarray, A: np.ndarray, lbx: np.ndarray, ubx
         return x, True
     H_free = H[np.ix_(c.free, c.free)]
     x = x.copy()
-    for step in range(POLISH_STEPS):
-        if step:
+    for k in range(POLISH_STEPS):
+        if k:
             kkt = _stationarity(H, f, A, c, x)
             if kkt.optimal:
                 return x, True
         gradient = (H @ x + f)[c.free]
-        d, step = _newton_on_face(H_free, gradient, kkt), 1.0
-        if d is None:
+        d, length = _newton_on_face(H_free, gradient, kkt), 1.0
+        if d is None:  # (the residual r: r'(−g) = |r|², the exact line search's length)
             d = kkt.residual
-            step = d.dot(d) / max(float(d @ H_free @ d), np.finfo(float).tiny)
-        t = min(step, _room(c, A, x, d))
+            length = d.dot(d) / max(float(d @ H_free @ d), np.finfo(float).tiny)
+        t = min(length, _room(c, A, x, d))
         if not t > 0.0:
             break
         y = x.copy()
@@ -209,12 +209,17 @@ def to_optimum(H: np.ndarray, f: np.ndarray, A: np.ndarray, lbx: np.ndarray, ubx
 
 def _newton_on_face(H_free: np.ndarray, gradient: np.ndarray, kkt: _Stationarity) -> np.ndarray | None:
     """Newton's step on the face of the active constraints with μ > 0, joined by each active one
-    the step would cross (the most crossed first), or None if that face has no room left or the
-    step is ~0 there."""
+    the step would cross (the most crossed first), or None if that face has no room left, is
+    singular (a normal within INDEPENDENT of the others' span), or the step is ~0 there."""
     m = gradient.size
     face = list(np.flatnonzero(kkt.mu > 0.0))
     while len(face) < m:
-        Q, _ = np.linalg.qr(kkt.N[:, face], mode="complete") if face else (np.eye(m), None)
+        if face:
+            Q, R = np.linalg.qr(kkt.N[:, face], mode="complete")
+            if not (np.abs(np.diag(R)) > INDEPENDENT).all():  # (a singular face, as in the C)
+                return None
+        else:
+            Q = np.eye(m)
         Z = Q[:, len(face):]
         p = -Z @ np.linalg.solve(Z.T @ H_free @ Z, Z.T @ gradient)
         size = math.sqrt(p.dot(p))
