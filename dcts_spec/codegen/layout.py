@@ -169,6 +169,7 @@ def workspace_fields(nq: int, nref: int, nx: int, na: int, nlevels: int, casadi_
         ("opt_column", "double", nxa, ""),
         ("opt_face", "int", nxa, "Newton's step on the active face: its constraints, reflectors, basis"),
         ("opt_beta", "double", nxa, ""),
+        ("opt_rdiag", "double", nxa, ""),
         ("opt_basis", "double", nxa * nxa, ""),
         ("opt_gram", "double", nxa * nxa, ""),
         ("opt_d", "double", nxa, "the step's direction, and the point it leads to"),
