@@ -25,7 +25,7 @@ from .formulations.parameters import ParameterLayout
 from .formulations.qp import BOUNDS
 from .parameter_ramp import ParameterRamp, ramp_steps
 from .robot.model import Robot
-from .solve import Structure, check_bounds, rounding_spread, solve_lexicographic, to_optimum, unbounded_solution
+from .solve import Hint, Structure, check_bounds, rounding_spread, solve_hinted, to_optimum, unbounded_solution
 from .spec import Spec, SpecError, load_spec
 from .symbolic.linalg import looped_products
 from .tasks import ReferenceInput
@@ -194,6 +194,7 @@ class Controller:
         self._torque_joints = np.array([j for j, i in enumerate(self.param_layout.torque_index) if i >= 0], dtype=int)
         self._torque_params = np.array([i for i in self.param_layout.torque_index if i >= 0], dtype=int)
         self._last_q: np.ndarray | None = None
+        self._hint: Hint | None = None  # where the last solve gave way (as the C runtime's hint_first)
         # (else tau_ext is not read: zero, whatever the sensor gives; the C runtime the same)
         self.reads_tau_ext = spec.controller.external_torque == "measured"
         qp = self.law.qp
@@ -268,9 +269,10 @@ class Controller:
         return self.param_layout.as_dict(self.param_layout.defaults)
 
     def reset(self) -> None:
-        """Forget the history (the last finite q, which the fallback torque holds), as the C
-        runtime's reset; the parameter set and its ramp are kept."""
+        """Forget the history (the last finite q, which the fallback torque holds, and where the last
+        solve gave way), as the C runtime's reset; the parameter set and its ramp are kept."""
         self._last_q = None
+        self._hint = None
 
     def reset_params(self) -> None:
         """Back to the compiled values at once (no ramp), as a freshly initialized controller."""
@@ -292,8 +294,10 @@ class Controller:
                 data["lba"].ravel(), data["uba"].ravel())
 
     def _solve(self, data: dict[str, np.ndarray]) -> np.ndarray | None:
-        """The lexicographic solution at the data (None if DAQP failed)."""
-        return solve_lexicographic(*self._qp(data), self._structure, data["Q"])
+        """The lexicographic solution at the data (None if DAQP failed), its cascade started where
+        the last step's gave way (`solve.Hint`: fewer QPs, the same answer)."""
+        x, self._hint = solve_hinted(*self._qp(data), self._structure, data["Q"], self._hint)
+        return x
 
     def answer_spread(self, q, dq, tau_ext, ref, x: np.ndarray, samples: int, enough: float) -> np.ndarray:
         """How far the last step's answer x (its QP solution, at this state) is determined by its QP
@@ -381,6 +385,7 @@ class Controller:
         if not self.reads_tau_ext:
             tau_ext = np.zeros(self.n)  # ignored: zero, whatever the sensor reads (a NaN too)
         if not np.isfinite(np.concatenate((q, dq, tau_ext, ref))).all():
+            self._hint = None  # (as the C runtime's)
             return self._fallback(q, dq, STATUS_NONFINITE_INPUT, np.zeros(0))
         self._last_q = q.copy()  # (q may be a view of the caller's array, which it may reuse)
         data = self._evaluate(q, dq, tau_ext, ref, param)
@@ -390,6 +395,8 @@ class Controller:
             buffer = self._data_buffer
             finite = np.isfinite(buffer.span("H", "A")).all() and not np.isnan(buffer.span("lba", "ubx")).any()
             solution = self._solve(data) if finite else None
+            if not finite:
+                self._hint = None
             if solution is None:
                 return self._fallback(q, dq, STATUS_SOLVER_FAILED, np.zeros(0))
             x = solution

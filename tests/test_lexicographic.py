@@ -28,7 +28,7 @@ import pinocchio as pin
 import pytest
 
 from dcts_spec.controller import Controller
-from dcts_spec.solve import Structure, solve_lexicographic, unbounded_solution
+from dcts_spec.solve import Hint, Structure, solve_hinted, solve_lexicographic, unbounded_solution
 from dcts_spec.robot.builtin import example_robot_data_dir
 from dcts_spec.spec import load_spec_text
 from dcts_spec.validate import validate_spec
@@ -1125,3 +1125,49 @@ def test_a_level_below_a_scaled_one_gets_its_largest_scaling():
         if bent or x[second] < best[second] - 1e-6 * ubx[second]:
             short.append((name, x[second] / ubx[second], best[second] / ubx[second], bent))
     assert not short, short
+
+
+# -- the hint: where the last step gave way --------------------------------------------------------
+
+
+def _hints(count: int, own: Hint | None) -> list[Hint]:
+    """The state's own hint, and for each level: every level from it bent, and none bent."""
+    out = [] if own is None else [own]
+    for first in range(count):
+        out.append(Hint(first, tuple(k >= first for k in range(count))))
+        out.append(Hint(first, (False,) * count))
+    return out
+
+
+@pytest.mark.parametrize(("robot", "levels"), PARAMS)
+def test_the_answer_does_not_depend_on_the_hint(robot, levels, monkeypatch):
+    """A hint only orders the cascade's stages: from any hint, right or wrong, the same answer
+    (to the stages' tolerance) as from none, on states where levels are scaled and bent; and from
+    the state's own hint, fewer QPs wherever a level above the lowest gave way."""
+    from dcts_spec.solve import lexicographic
+
+    c = case(robot, levels).controller
+    solves = []
+    original = lexicographic.daqp_qp
+    monkeypatch.setattr(lexicographic, "daqp_qp", lambda *a: solves.append(1) or original(*a))
+    tried = saved = 0
+    for st in near_bound_states(robot, case(robot, levels).model, 20, 11 * levels):
+        data = c.evaluate_data(st.q, st.dq, st.tau_ext)
+        args = (*c._qp(data), c._structure, data["Q"])
+        solves.clear()
+        x, own = solve_hinted(*args, None)
+        cold = len(solves)
+        for hint in _hints(len(c._structure.priorities), own):
+            solves.clear()
+            y, again = solve_hinted(*args, hint)
+            assert (x is None) == (y is None)
+            if x is None:
+                continue
+            torque = data["T"] @ (y - x)
+            assert np.abs(torque).max() <= 1e-9 * max(1.0, float(np.abs(data["T"] @ x).max())), (hint, own)
+            assert again == own
+            if hint is own and own.skips_stages(len(own.bent)) and own.first < len(own.bent) - 1:
+                tried += 1
+                saved += len(solves) < cold
+    assert tried >= 3, "too few states where an upper level gives way to test the hint on"
+    assert saved == tried, f"the state's own hint saved QPs in {saved} of {tried} states where an upper level gave way"

@@ -22,6 +22,11 @@ a level therefore means fixing its variables (lb = ub), and the cascade is:
      joint/Cartesian bounds: `relax` violates them as little as they allow (one slack per
      bound, min Σσ), those bounds are widened to what was achieved, and 1–2 run again.
 
+In closed loop a step usually gives way where the last one did: given that step's `Hint`, steps
+1–2 start at the level it names, the levels above nominal, and a level it says bent runs its bend
+stage first. A stage the cascade runs anyway proves each shortcut (or shows the hint wrong, and
+the cascade starts over), so the answer is the same, in fewer QPs (`Cascade.levels`).
+
 A stage's objective is linear in its level (max sᵢ) or only sees it (min ‖δᵢ‖²); the other
 variables just have to exist, and DAQP needs a positive definite Hessian. So each stage runs the
 proximal-point method: a few QPs min φ(x)/ρ + ½‖x − c‖², each centred at the previous answer.
@@ -142,6 +147,24 @@ STATIONARY_TOLERANCE = 1e-10
 # was the answer, arbitrary in the freedom the final QP is for: C and Python parted by 6 Nm.
 FACE_TOLERANCE = 1e-9
 INDEPENDENT_ROW = 1e-6
+
+@dataclass(frozen=True)
+class Hint:
+    """Where a step's hierarchy gave way: the first level not met (s < 1 or bent) and the levels
+    bent. In closed loop the next step usually gives way in the same place, and its solve starts
+    there (`Cascade.levels`): 3–4 QPs fewer where a level bends, the answer the same."""
+
+    first: int
+    bent: tuple[bool, ...]
+
+    def skips_stages(self, count: int) -> bool:
+        """Does starting from it save a stage? Not where only the lowest level is scaled: its
+        stage is the cascade's first QP anyway."""
+        return len(self.bent) == count and (self.first < count - 1 or self.bent[self.first])
+
+
+MISSED = object()  # `Cascade._descend`: a hint that was wrong
+
 
 @dataclass(frozen=True)
 class Structure:
@@ -385,6 +408,7 @@ class Cascade:
         # the last QP, and DAQP's multipliers; None if it failed (or its answer did not hold)
         self._last_qp: tuple[FixedEliminated, np.ndarray] | None = None
         self._held = np.zeros(lba.size, dtype=bool)  # the rows `_hold_face` holds at their values
+        self.bent: list[bool] = []  # by level: did `levels` bend it
         self._set_row_bounds()
 
     def _set_row_bounds(self) -> None:
@@ -672,17 +696,47 @@ class Cascade:
         self._set_row_bounds()
         return None if x is None or not self._holds(x) else x
 
-    def levels(self) -> np.ndarray | None:
-        """Steps 1–2 of the module docstring on the current bounds."""
+    def levels(self, hint: Hint | None = None) -> np.ndarray | None:
+        """Steps 1–2 of the module docstring on the current bounds. `hint`: where the last step's
+        hierarchy gave way (`Hint`); its stages are tried first, and the answer is the same."""
         count = len(self.structure.priorities)
+        self.bent = [False] * count
         if not count or self.structure.spare_variables:  # (with spare variables, see finish_lowest)
             x = self.final(0, self.lbx, self.ubx)
             if x is not None or not count:
                 return x
-        x = self.finish_lowest(*self._above_nominal(count - 1))
-        if x is not None:
-            return x
-        start, lbx, ubx, witness = self._first_to_scale()
+        tried = False  # the first QP, `finish_lowest` with every level above nominal
+        if hint is not None and hint.skips_stages(count) and not self.structure.spare_variables:
+            if hint.first == count - 1:
+                # (the lowest level bent: the first QP first, as where the level is met again it
+                # is the only one; the bend stage the hint would start with takes 2–3)
+                x = self.finish_lowest(*self._above_nominal(count - 1))
+                if x is not None:
+                    return x
+                tried = True
+            lbx, ubx = self.lbx.copy(), self.ubx.copy()
+            above = self.structure.levels_above[hint.first]
+            lbx[above] = ubx[above] = self.nominal[above]  # (s = 1, δ = 0)
+            x = self._descend(hint.first, lbx, ubx, None, hint.bent)
+            if x is not MISSED:
+                return x
+        if not tried:
+            x = self.finish_lowest(*self._above_nominal(count - 1))
+            if x is not None:
+                return x
+        return self._descend(*self._first_to_scale(), None)
+
+    def _descend(self, start: int, lbx, ubx, witness: np.ndarray | None,
+                 hinted_bends: tuple[bool, ...] | None) -> np.ndarray | None | object:
+        """Step 2 from level `start`, the levels above it fixed in lbx/ubx. Without a hint, every
+        stage `levels` and `_first_to_scale` found infeasible (the levels above nominal) is skipped;
+        with one, the levels above `start` are met if `start`'s first stage is feasible (they are
+        nominal in it, and nothing is above nominal), MISSED if it is not (start > 0: the hint was
+        wrong), and a level the hint says bent tries its bend stage first: a bend that is not
+        negligible means that no scaling of the level unbent is feasible, which is what its
+        scaling stage would have found; a negligible one, that the level scales after all."""
+        count = len(self.structure.priorities)
+        hinted = hinted_bends is not None
         for i in range(start, count):
             s, bend = self.structure.priorities[i]
             bend = list(bend)
@@ -690,21 +744,28 @@ class Cascade:
             if witness is None or i > start:  # (the first level to scale may be solved already)
                 free_lo, free_hi = lbx.copy(), ubx.copy()
                 lbx[bend] = ubx[bend] = 0.0
+                x, bent = None, None
+                if hinted and hinted_bends[i]:
+                    bent = self.bend(i, free_lo, free_hi)
+                    if bent is not None and self._negligible(bent[bend], bent):
+                        bent = None  # (the level scales: its scaling stage below)
+                    elif bent is None and i == start:
+                        return MISSED if i > 0 else None  # (nothing is feasible if the top level's bend is not)
                 # with every level above nominal, `_first_to_scale` (or for the lowest level, the
                 # first QP, also when it is the only level) found this stage infeasible
-                if (i > 0 or lowest) and self._nominal_through(i, lbx, ubx):
-                    x = None
-                else:
+                if bent is None and not (not hinted and (i > 0 or lowest) and self._nominal_through(i, lbx, ubx)):
                     x = self.finish_lowest(lbx, ubx) if lowest else self.scale(i, lbx, ubx)
                 if x is None:
-                    x = self.bend(i, free_lo, free_hi)
-                    if x is None:  # infeasible: only possible for the first level, else DAQP failed
+                    if bent is None:
+                        bent = self.bend(i, free_lo, free_hi)
+                    if bent is None:  # infeasible: only possible for the first level, else DAQP failed
                         if witness is None:
-                            return None
+                            return MISSED if hinted and i > 0 else None
                         # on the sliver the levels above leave (see smallest_bend), whose point
                         # the witness is: its split made the bend's, the levels below solved on
-                        x = witness
-                    x = self.smallest_bend(i, x, free_lo, free_hi)
+                        bent = witness
+                    self.bent[i] = True
+                    x = self.smallest_bend(i, bent, free_lo, free_hi)
                     self._admit(x, lbx, ubx)
                     lbx[bend] = ubx[bend] = x[bend]
                     # (the bend's solution witnesses a scaling)
@@ -731,6 +792,12 @@ class Cascade:
             if x is not None:
                 return x
         return witness
+
+    def hint(self, x: np.ndarray) -> Hint | None:
+        """Where this solve's answer x gave way, for the next step's solve (None: every level met)."""
+        priorities = self.structure.priorities
+        first = next((k for k, (s, _) in enumerate(priorities) if self.bent[k] or x[s] < self.nominal[s]), None)
+        return None if first is None else Hint(first, tuple(self.bent))
 
     def _hold_face(self, level: int, witness: np.ndarray, lbx, ubx) -> None:
         """After `level`'s scaling stage, its variables now fixed in lbx/ubx: if the stage's last QP
@@ -865,13 +932,20 @@ def solve_lexicographic(H, f, A, lbx, ubx, lba, uba, structure: Structure,
     """The lexicographic solution of a QP's priority levels (None if DAQP failed); with the
     acceleration map Q, a bent level's split into s and δ the least bend (`Cascade.smallest_bend`).
     Whether the bounds had to be relaxed is for `check_bounds` to tell, on the original data."""
+    return solve_hinted(H, f, A, lbx, ubx, lba, uba, structure, acceleration_map, None)[0]
+
+
+def solve_hinted(H, f, A, lbx, ubx, lba, uba, structure: Structure, acceleration_map: np.ndarray | None,
+                 hint: Hint | None) -> tuple[np.ndarray | None, Hint | None]:
+    """`solve_lexicographic` starting where the last step gave way (`hint`), and where this one did."""
     cascade = Cascade(H, f, A, lbx, ubx, lba, uba, structure, acceleration_map)
-    x = cascade.levels()
-    if x is not None or not cascade.relax():
-        return x
-    x = cascade.levels()
-    # (the relaxation's own point meets the widened bounds: better than no answer, if DAQP fails)
-    return cascade.relaxed_point if x is None else x
+    x = cascade.levels(hint)
+    if x is None and cascade.relax():
+        x = cascade.levels(hint)
+        # (the relaxation's own point meets the widened bounds: better than no answer, if DAQP fails)
+        if x is None:
+            return cascade.relaxed_point, None
+    return x, None if x is None else cascade.hint(x)
 
 
 @dataclass
