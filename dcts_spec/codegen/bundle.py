@@ -645,6 +645,7 @@ def generate_sources(
         "PROXIMAL_ITERATIONS": lexicographic.PROXIMAL_ITERATIONS,
         "BACKOFF_LIMIT": c_double(lexicographic.BACKOFF_LIMIT),
         "PROXIMAL_TOLERANCE": c_double(lexicographic.PROXIMAL_TOLERANCE),
+        "ROUNDING_HAIR": c_double(lexicographic.ROUNDING_HAIR),
         "STATIONARY_TOLERANCE": c_double(lexicographic.STATIONARY_TOLERANCE),
         "RELAX_STEPS": ", ".join(c_double(step) for step in lexicographic.RELAX_STEPS),
         "RELAX_TRIES": len(lexicographic.RELAX_STEPS),

@@ -147,6 +147,7 @@ def workspace_fields(nq: int, nref: int, nx: int, na: int, nlevels: int, casadi_
         ("bent", "int", n["nlevels"], "by priority: bent in this solve"),
         ("hint_first", "int", 0, "where the last step gave way (Hint): the first priority not met, -1 none"),
         ("hint_bent", "int", n["nlevels"], "and the priorities it bent"),
+        ("hint_steady", "int", 0, "and it is where the step before gave way too"),
         ("center", "double", nx2, "proximal steps"),
         ("direction", "double", nx2, ""),
         ("trial", "double", nx2, ""),

@@ -109,6 +109,12 @@ PROXIMAL_ITERATIONS = 30
 # (1e-10 was at DAQP's resolution: 5 % of the bench's closed-loop states ran a stage's 30 QPs
 # with a variable its objective does not see moving 3e-10 each time, and no other change)
 PROXIMAL_TOLERANCE = 1e-9
+# A lowest level's scaling this close to a bound (relative to the level met, s = 1) is that bound
+# up to the rounding of the QP that found it, and `Cascade._snapped` sets it there without the QP
+# it runs for larger hairs. After the lowest level bends, its largest scaling is usually 0 and the
+# final QP ends 1e-17-1e-16 (relative) from it: that QP was one of the 5-6 of every such step
+# (bench spec, TALOS 16). The hairs the runtimes parted on were 2e-11 and more.
+ROUNDING_HAIR = 1e-14
 # The lowest level's scaling and the final QP in one (Cascade.finish_lowest): the weight of its
 # scaling, relative to the largest entry of H and f, and a larger one where the check says it was
 # too small. Below the exact-penalty threshold the answer's scaling is short of the largest, which
@@ -152,10 +158,11 @@ INDEPENDENT_ROW = 1e-6
 class Hint:
     """Where a step's hierarchy gave way: the first level not met (s < 1 or bent) and the levels
     bent. In closed loop the next step usually gives way in the same place, and its solve starts
-    there (`Cascade.levels`): 3–4 QPs fewer where a level bends, the answer the same."""
+    there (`Cascade.levels`): 1–3 QPs fewer where a level bends, the answer the same."""
 
     first: int
     bent: tuple[bool, ...]
+    steady: bool = False  # the step before gave way in the same place too
 
     def skips_stages(self, count: int) -> bool:
         """Does starting from it save a stage? Not where only the lowest level is scaled: its
@@ -595,9 +602,14 @@ class Cascade:
         bound, where DAQP solves it. Such a scaling is the bound up to where a QP stopped, and the
         two runtimes' QPs stop in different places: after a bend on a 29-joint iCub, one found
         s = 2.3e-11, the other 4.3e-11 (and 0 against 2.5e-9 in another state), and with the
-        level's large task acceleration their q̈ parted by 1.3e-6 and 7e-4 relative."""
+        level's large task acceleration their q̈ parted by 1.3e-6 and 7e-4 relative. Within
+        ROUNDING_HAIR of the bound, x with the scaling set there (no QP)."""
         s, _ = self.structure.priorities[-1]
         for bound in (lbx[s], ubx[s]):
+            if x[s] != bound and abs(x[s] - bound) <= ROUNDING_HAIR * self.nominal[s]:
+                out = x.copy()  # (rounding: the final QP at the bound would move nothing it can resolve)
+                out[s] = bound
+                return out
             if x[s] != bound and self._negligible(x[s:s + 1] - bound, x):
                 lo, hi = lbx.copy(), ubx.copy()
                 lo[s] = hi[s] = bound
@@ -707,9 +719,10 @@ class Cascade:
                 return x
         tried = False  # the first QP, `finish_lowest` with every level above nominal
         if hint is not None and hint.skips_stages(count) and not self.structure.spare_variables:
-            if hint.first == count - 1:
-                # (the lowest level bent: the first QP first, as where the level is met again it
-                # is the only one; the bend stage the hint would start with takes 2–3)
+            if hint.first == count - 1 and not hint.steady:
+                # (the lowest level bent once: the first QP first, as where the level is met again
+                # it is the only one, and the lowest level's bend flickers at its boundary; bent
+                # for two steps, it is skipped)
                 x = self.finish_lowest(*self._above_nominal(count - 1))
                 if x is not None:
                     return x
@@ -937,7 +950,8 @@ def solve_lexicographic(H, f, A, lbx, ubx, lba, uba, structure: Structure,
 
 def solve_hinted(H, f, A, lbx, ubx, lba, uba, structure: Structure, acceleration_map: np.ndarray | None,
                  hint: Hint | None) -> tuple[np.ndarray | None, Hint | None]:
-    """`solve_lexicographic` starting where the last step gave way (`hint`), and where this one did."""
+    """`solve_lexicographic` starting where the last step gave way (`hint`), and where this one did
+    (steady if that is where the last one did too)."""
     cascade = Cascade(H, f, A, lbx, ubx, lba, uba, structure, acceleration_map)
     x = cascade.levels(hint)
     if x is None and cascade.relax():
@@ -945,7 +959,10 @@ def solve_hinted(H, f, A, lbx, ubx, lba, uba, structure: Structure, acceleration
         # (the relaxation's own point meets the widened bounds: better than no answer, if DAQP fails)
         if x is None:
             return cascade.relaxed_point, None
-    return x, None if x is None else cascade.hint(x)
+    new = None if x is None else cascade.hint(x)
+    if new is not None and hint is not None and (new.first, new.bent) == (hint.first, hint.bent):
+        new = Hint(new.first, new.bent, True)
+    return x, new
 
 
 @dataclass
