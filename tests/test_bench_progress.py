@@ -38,7 +38,7 @@ def test_bench_announces_each_stage(monkeypatch: pytest.MonkeyPatch, tmp_path: P
         "trajectory_states": lambda controller, n, seed, step: [state] * n,
         "StateSampler": lambda controller, seed: SimpleNamespace(mixed=lambda n, limit_fraction: [state] * n),
         "build_c_harness": lambda *args: tmp_path / "harness",
-        "run_c_harness": lambda *args: c_times,
+        "run_c_harness": lambda *args, **kwargs: c_times,
         "callgrind_instructions": lambda *args: 1.0,
         "object_sizes": lambda *args: {},
         "c_source_bytes": lambda *args: 0,

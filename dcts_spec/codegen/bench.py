@@ -2,7 +2,8 @@
 
 The C controller is timed by a C harness (no Python in the loop) linked with the bundle's own
 objects, built as its Makefile builds them (codegen/flags.py), over states along closed-loop motions (the order a control loop sees, so the
-history the workspace keeps is realistic) and over independent random states. Pinocchio's numeric dynamics
+history the workspace keeps is realistic) and over independent random states (each from a fresh controller:
+`_reset` before it, untimed). Pinocchio's numeric dynamics
 terms (computeAllTerms + the task frames' Jacobians) on the same states are the reference a
 hand-written controller would start from.
 """
@@ -73,13 +74,16 @@ def build_c_harness(bundle: Path, manifest: dict, work: Path) -> Path:
 REPEATS = 3  # each configuration runs this often; the run with the lowest median step counts
 
 
-def run_c_harness(exe: Path, states: list[State], work: Path, tag: str) -> dict:
+def run_c_harness(exe: Path, states: list[State], work: Path, tag: str, independent: bool = False) -> dict:
+    """The harness's timing of the states, in order (`independent`: each from a fresh controller,
+    reset before it outside the timed region, as the states do not follow one another)."""
     states_file, out = work / f"states_{tag}.bin", work / f"times_{tag}.bin"
     _write_states(states_file, states)
     count = len(states)
     best, raw = None, b""
+    command = [str(exe), str(states_file), str(out)] + (["independent"] if independent else [])
     for _ in range(REPEATS):  # a shared machine: keep the least disturbed run
-        run([str(exe), str(states_file), str(out)], work, "bench harness", timeout=1800)
+        run(command, work, "bench harness", timeout=1800)
         this = out.read_bytes()
         median = float(np.median(np.frombuffer(this[: 8 * count], dtype=np.int64)))
         if best is None or median < best:
@@ -275,7 +279,7 @@ def bench(spec_file: str | Path, formulation: str | None = None, states: int = 1
               f"the independent states, best of {REPEATS} runs each")
         exe = build_c_harness(bundle, manifest, work)
         c_traj = run_c_harness(exe, along, work, "trajectory")
-        c_rand = run_c_harness(exe, independent, work, "random")
+        c_rand = run_c_harness(exe, independent, work, "random", independent=True)
         python_along = along[: min(python_states, len(along))]
         phase(f"timing the Python runtime on {len(python_along)} states, and the C step through ctypes on the "
               f"same, best of {REPEATS} runs each")

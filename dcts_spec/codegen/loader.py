@@ -264,7 +264,7 @@ class CompiledController:
         return {"solves": self._info.solves, "iterations": self._info.iterations, "exitflag": self._info.exitflag}
 
     def reset(self) -> None:
-        """Forget the history (the last finite q)."""
+        """Forget the history (the last finite q, and where the last solve gave way)."""
         if not self._open:  # (as step and the parameters: a closed controller says so)
             raise RuntimeError("the controller was closed")
         self._reset(self._ws)
