@@ -1180,15 +1180,13 @@ def test_the_answer_does_not_depend_on_the_hint(robot, levels, monkeypatch):
     assert saved == tried, f"the state's own hint saved QPs in {saved} of {tried} states where it skips stages"
 
 
-@pytest.mark.xfail(strict=True, reason="known gap (docs/formulations.md, 'A held row found dependent'): the "
-                   "rows _hold_face drops as dependent lose their bounds, and the stages below can cross one")
 def test_a_held_row_found_dependent_is_not_crossed():
     """A Panda state (4 levels) where four joints brake at their acceleration limits: after the top
     level's scaling, its certificate's rows are held, and joint 5's row is 8e-12 from the span of
-    three held ones (joint 4's itself 1.5e-5 from the others'): dropped as constant on the face, it
-    loses its bounds, and the bend below crosses it by 5e-6 of its bound, through the tolerance
-    DAQP holds the others to. Every bound can hold (the top level's scaling stage's answer holds
-    every row), yet the step reports "limits relaxed"."""
+    three held ones (joint 4's itself 1.5e-5 from the others'). Dropped as constant on the face, it
+    lost its bounds, and the bend below crossed it by 5e-6 of its bound through the tolerance DAQP
+    holds the others to: "limits relaxed" where every bound can hold. Now the cascade runs once
+    more with such rows keeping their bounds (`solve_hinted`), and every bound holds."""
     args, structure = saved_qp("held_row_dependent")
     Q = np.load(Path(__file__).parent / "data" / "held_row_dependent.npz")["Q"]
     H, f, A, lbx, ubx, lba, uba = args

@@ -400,8 +400,10 @@ class Cascade:
     (q̈ = q̈₀ + Q x), from which a bent level's split into s and δ is made exact (`smallest_bend`);
     without it, the split is the bend stage's own."""
 
-    def __init__(self, H, f, A, lbx, ubx, lba, uba, structure: Structure, acceleration_map: np.ndarray | None = None):
+    def __init__(self, H, f, A, lbx, ubx, lba, uba, structure: Structure, acceleration_map: np.ndarray | None = None,
+                 reopen: bool = False):
         self.H, self.f, self.A = H, f, A
+        self.reopen = reopen  # `_hold_face`'s dependent rows keep their bounds (`solve_hinted`)
         self.acceleration_map = acceleration_map
         self.lbx, self.ubx = lbx.copy(), ubx.copy()
         self.lba, self.uba = lba.copy(), uba.copy()
@@ -415,6 +417,9 @@ class Cascade:
         # the last QP, and DAQP's multipliers; None if it failed (or its answer did not hold)
         self._last_qp: tuple[FixedEliminated, np.ndarray] | None = None
         self._held = np.zeros(lba.size, dtype=bool)  # the rows `_hold_face` holds at their values
+        self._dropped = np.zeros(lba.size, dtype=bool)  # and the ones it found dependent (`_hold_rows`)
+        # each row's bounds when it is not held (what a dropped row is checked on, or gets back)
+        self._open_lba, self._open_uba = self.lba.copy(), self.uba.copy()
         self.bent: list[bool] = []  # by level: did `levels` bend it
         self._set_row_bounds()
 
@@ -833,13 +838,14 @@ class Cascade:
         if not rows.size:
             return
         self._held[rows] = True
-        self._hold_rows(self._held, witness, lbx, ubx)
+        self._hold_rows(self._held, witness, lbx, ubx, face=True)
 
-    def _hold_rows(self, rows: np.ndarray, point: np.ndarray, lbx, ubx) -> None:
+    def _hold_rows(self, rows: np.ndarray, point: np.ndarray, lbx, ubx, face: bool = False) -> None:
         """The rows of the mask `rows` as equalities at their values at `point` (within lbx/ubx), but
         the ones whose coefficients in the free variables are within INDEPENDENT_ROW (relative) of
         the span of those before them (Gram–Schmidt, in row order): on the face they are constant,
-        and they are dropped (no bounds) and cleared from the mask."""
+        and they are dropped (no bounds) and cleared from the mask. `face` (`_hold_face`'s holds):
+        those dropped are noted, and with `reopen` keep their own bounds (see `solve_hinted`)."""
         value = self.A @ np.minimum(np.maximum(point, lbx), ubx)  # (at the fixed variables' values)
         free = lbx != ubx
         basis: list[np.ndarray] = []  # orthonormal, of the rows held so far (in the free variables)
@@ -853,8 +859,19 @@ class Cascade:
                 self.lba[i] = self.uba[i] = value[i]
             else:
                 rows[i] = False
-                self.lba[i], self.uba[i] = -np.inf, np.inf
+                self._dropped[i] |= face
+                reopened = face and self.reopen
+                self.lba[i], self.uba[i] = (self._open_lba[i], self._open_uba[i]) if reopened else (-np.inf, np.inf)
         self._set_row_bounds()
+
+    def crosses_dropped(self, x: np.ndarray) -> bool:
+        """Does x cross, beyond FEASIBILITY_TOLERANCE, a row `_hold_face` dropped as dependent?"""
+        if not self._dropped.any():
+            return False
+        lower, upper = self._open_lba[self._dropped], self._open_uba[self._dropped]
+        value = self.A[self._dropped] @ x
+        excess = np.maximum(lower - value, value - upper) / np.maximum(1.0, np.minimum(np.abs(lower), np.abs(upper)))
+        return bool((excess > FEASIBILITY_TOLERANCE).any())
 
     def _admit(self, x: np.ndarray, lbx: np.ndarray, ubx: np.ndarray) -> None:
         """Widen the rows and the variable bounds lbx/ubx that x crosses (by at most the check's
@@ -869,6 +886,13 @@ class Cascade:
         value = self.A @ x
         np.minimum(self.lba, value, out=self.lba)
         np.maximum(self.uba, value, out=self.uba)
+        # (a dropped row's own bounds as far as x crosses them within the check's tolerance only:
+        # beyond it, x crossed a row the face had dropped, which `crosses_dropped` is to see)
+        lower, upper = self._open_lba, self._open_uba
+        within = np.maximum(lower - value, value - upper) <= FEASIBILITY_TOLERANCE * np.maximum(
+            1.0, np.minimum(np.abs(lower), np.abs(upper)))
+        np.minimum(lower, np.where(within, value, lower), out=lower)
+        np.maximum(upper, np.where(within, value, upper), out=upper)
         self._set_row_bounds()
 
     def _above_nominal(self, level: int) -> tuple[np.ndarray, np.ndarray]:
@@ -936,6 +960,7 @@ class Cascade:
         # the stages below cross it)
         self.lba[rows.start : rows.stop] = np.where(value < lo - margin, value - margin, lo)
         self.uba[rows.start : rows.stop] = np.where(value > hi + margin, value + margin, hi)
+        self._open_lba, self._open_uba = self.lba.copy(), self.uba.copy()
         self._set_row_bounds()
         return True
 
@@ -954,6 +979,14 @@ def solve_hinted(H, f, A, lbx, ubx, lba, uba, structure: Structure, acceleration
     (steady if that is where the last one did too)."""
     cascade = Cascade(H, f, A, lbx, ubx, lba, uba, structure, acceleration_map)
     x = cascade.levels(hint)
+    if x is not None and cascade.crosses_dropped(x):
+        # a row dropped as dependent on a held face was not constant enough (held rows nearly
+        # dependent themselves amplify DAQP's tolerance: docs/formulations.md, "A held row found
+        # dependent"): once more with such rows keeping their bounds, kept if it holds them
+        again = Cascade(H, f, A, lbx, ubx, lba, uba, structure, acceleration_map, reopen=True)
+        y = again.levels(hint)
+        if y is not None and not again.crosses_dropped(y):
+            cascade, x = again, y
     if x is None and cascade.relax():
         x = cascade.levels(hint)
         # (the relaxation's own point meets the widened bounds: better than no answer, if DAQP fails)
