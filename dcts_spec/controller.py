@@ -394,9 +394,10 @@ class Controller:
             # H, f, A and the bounds are consecutive outputs: two checks instead of seven
             buffer = self._data_buffer
             finite = np.isfinite(buffer.span("H", "A")).all() and not np.isnan(buffer.span("lba", "ubx")).any()
-            solution = self._solve(data) if finite else None
-            if not finite:
-                self._hint = None
+            if finite:
+                solution = self._solve(data)
+            else:
+                solution, self._hint = None, None  # (as the C runtime's)
             if solution is None:
                 return self._fallback(q, dq, STATUS_SOLVER_FAILED, np.zeros(0))
             x = solution

@@ -274,6 +274,13 @@ class FixedEliminated:
         return FixedEliminated(self.free, self.point, self.A, lower, upper, self.hessian_index, self.rows, self.row_norms)
 
 
+def outside_tolerance(value: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
+    """Which values cross their bounds by more than FEASIBILITY_TOLERANCE, relative to
+    max(1, min(|lower|, |upper|)): the check of every answer (`Cascade._holds`)."""
+    excess = np.maximum(lower - value, value - upper)
+    return excess > FEASIBILITY_TOLERANCE * np.maximum(1.0, np.minimum(np.abs(lower), np.abs(upper)))
+
+
 def constant_rows(A: np.ndarray, A_free: np.ndarray) -> np.ndarray:
     """The rows whose coefficients of the free variables are nothing but rounding: at most
     CONSTANT_ROW × the row's largest coefficient (all zero in exact arithmetic, ~1e-16 relative
@@ -449,11 +456,7 @@ class Cascade:
         """Does x hold the last QP's variable bounds and the rows' bounds as they are now, within
         FEASIBILITY_TOLERANCE (relative to max(1, |bound|))? On the clipped bounds: the same excess
         as on the infinite ones (x and Ax are far below 1e30), and no ∞ − ∞ to guard against."""
-        lower, upper = self._lower, self._upper
-        value = np.concatenate([x, self.A @ x])
-        excess = np.maximum(lower - value, value - upper)
-        excess /= np.maximum(1.0, np.minimum(np.abs(lower), np.abs(upper)))
-        return not (excess > FEASIBILITY_TOLERANCE).any()
+        return not outside_tolerance(np.concatenate([x, self.A @ x]), self._lower, self._upper).any()
 
     def final(self, upto: int, lbx, ubx) -> np.ndarray | None:
         """½xᵀHx + fᵀx with the levels [0, upto) as they are in lbx/ubx and the others nominal."""
@@ -868,10 +871,7 @@ class Cascade:
         """Does x cross, beyond FEASIBILITY_TOLERANCE, a row `_hold_face` dropped as dependent?"""
         if not self._dropped.any():
             return False
-        lower, upper = self._open_lba[self._dropped], self._open_uba[self._dropped]
-        value = self.A[self._dropped] @ x
-        excess = np.maximum(lower - value, value - upper) / np.maximum(1.0, np.minimum(np.abs(lower), np.abs(upper)))
-        return bool((excess > FEASIBILITY_TOLERANCE).any())
+        return bool(outside_tolerance(self.A[self._dropped] @ x, self._open_lba[self._dropped], self._open_uba[self._dropped]).any())
 
     def _admit(self, x: np.ndarray, lbx: np.ndarray, ubx: np.ndarray) -> None:
         """Widen the rows and the variable bounds lbx/ubx that x crosses (by at most the check's
@@ -889,8 +889,7 @@ class Cascade:
         # (a dropped row's own bounds as far as x crosses them within the check's tolerance only:
         # beyond it, x crossed a row the face had dropped, which `crosses_dropped` is to see)
         lower, upper = self._open_lba, self._open_uba
-        within = np.maximum(lower - value, value - upper) <= FEASIBILITY_TOLERANCE * np.maximum(
-            1.0, np.minimum(np.abs(lower), np.abs(upper)))
+        within = ~outside_tolerance(value, lower, upper)
         np.minimum(lower, np.where(within, value, lower), out=lower)
         np.maximum(upper, np.where(within, value, upper), out=upper)
         self._set_row_bounds()
