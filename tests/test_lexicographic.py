@@ -694,7 +694,7 @@ def test_a_certified_answer_is_the_lp_optimum_and_a_short_one_is_not(robot):
     with the levels above fixed (an LP). DAQP's answer of min ½‖x − c‖² − s/ρ, the scaling stage's
     proximal QP, is certified for max s only where its s is HiGHS's largest (to 1e-9): at the
     stage's ρ = 1e-8 in most states, at ρ = 1 (s held back by ‖x − c‖²) never where s falls short."""
-    from dcts_spec.solve.lexicographic import FixedEliminated, clip_to_daqp, daqp_qp, stationary
+    from dcts_spec.solve.stage_qp import FixedEliminated, clip_to_daqp, daqp_qp, stationary
 
     states = _lowest_gives_way(robot, 150)
     certified, short = 0, 0
@@ -731,7 +731,7 @@ def test_fixed_variables_eliminated_give_the_qp_with_them_fixed(robot):
     scale; every level fixed; none), with DAQP seeing only the free columns. The same objective
     to 1e-10; x to 1e-5, as the QPs are flat along some directions (objectives equal to 12 digits
     where x differed by 7e-7)."""
-    from dcts_spec.solve.lexicographic import FixedEliminated, clip_to_daqp, daqp_qp
+    from dcts_spec.solve.stage_qp import FixedEliminated, clip_to_daqp, daqp_qp
 
     states = _lowest_gives_way(robot, 150)
     assert states, "the premise: states where the lowest level gives way"
@@ -774,7 +774,8 @@ def test_a_row_that_sees_no_free_variable_is_checked_on_its_own_scale():
     (C and Python parted this way on a 16-joint hand with 4 levels). Such a row goes to DAQP
     without bounds, and the stage's check on the rows, relative to the bound, decides: it holds
     here (1.5e-16 relative), and a row crossed for real still makes the stage fail."""
-    from dcts_spec.solve.lexicographic import Cascade, FixedEliminated, daqp_qp
+    from dcts_spec.solve.lexicographic import Cascade
+    from dcts_spec.solve.stage_qp import FixedEliminated, daqp_qp
 
     fixed = 1e5
     H, f = np.eye(3), np.array([0.0, 5.0, -1.0])  # (its minimum without rows crosses a bound: DAQP
@@ -915,11 +916,11 @@ def test_with_a_run_time_activation_the_final_qp_is_solved(name):
 def test_a_final_qp_with_a_feasible_point_gets_a_widened_retry(monkeypatch):
     """The first state above with rows of free coefficients ~1e-12 left in DAQP's QP (the old
     CONSTANT_ROW): DAQP fails its final QP, and the retry with the rows widened by 1e-10 solves it."""
-    from dcts_spec.solve import lexicographic
+    from dcts_spec.solve import stage_qp
 
-    monkeypatch.setattr(lexicographic, "CONSTANT_ROW", 1e-12)
+    monkeypatch.setattr(stage_qp, "CONSTANT_ROW", 1e-12)
     assert abs(_final_objective_gap("activation_final_qp")) <= 1e-9
-    monkeypatch.setattr(lexicographic.FixedEliminated, "widened", lambda qp, relative: qp)
+    monkeypatch.setattr(stage_qp.FixedEliminated, "widened", lambda qp, relative: qp)
     assert _final_objective_gap("activation_final_qp") > 1e-3
 
 
@@ -930,14 +931,14 @@ def test_the_certificates_least_squares_solves_and_refuses_a_singular_system(row
     the solution of a positive definite system, None for one with a zero pivot. (Nearly dependent
     rows leave a tiny pivot in either path; the multipliers are still checked on the residual and
     their signs, so that can cost a QP, not certify a wrong answer.)"""
-    from dcts_spec.solve.lexicographic import _cholesky_solve
+    from dcts_spec.solve.stage_qp import cholesky_solve
 
     rng = np.random.default_rng(rows)
     C = rng.normal(size=(rows, rows + 2))
     G, b = C @ C.T, rng.normal(size=rows)
-    assert np.allclose(_cholesky_solve(G.copy(), b.copy()), np.linalg.solve(G, b), rtol=1e-9, atol=1e-12)
+    assert np.allclose(cholesky_solve(G.copy(), b.copy()), np.linalg.solve(G, b), rtol=1e-9, atol=1e-12)
     C[-1] = 0.0  # a row DAQP held active that sees no free variable: a zero pivot
-    assert _cholesky_solve(C @ C.T, b) is None
+    assert cholesky_solve(C @ C.T, b) is None
 
 
 def test_a_level_met_is_not_left_short_by_the_weighted_qp(monkeypatch):

@@ -27,7 +27,7 @@ from ..formulations import fallback
 from ..formulations.qp import BOUNDS, HARD
 from ..parameter_ramp import ramp_steps
 from ..solve import BOUND_TOLERANCE, DAQP_SETTINGS
-from ..solve import lexicographic, optimality
+from ..solve import lexicographic, optimality, stage_qp
 from ..spec import Spec
 from ..spec.loader import recorded_bytes
 from .layout import (C_DATA_OUTPUTS, array_lengths, casadi_work_lengths, daqp_storage, header_fields, workspace_fields,
@@ -646,16 +646,16 @@ def generate_sources(
         "BACKOFF_LIMIT": c_double(lexicographic.BACKOFF_LIMIT),
         "PROXIMAL_TOLERANCE": c_double(lexicographic.PROXIMAL_TOLERANCE),
         "ROUNDING_HAIR": c_double(lexicographic.ROUNDING_HAIR),
-        "STATIONARY_TOLERANCE": c_double(lexicographic.STATIONARY_TOLERANCE),
+        "STATIONARY_TOLERANCE": c_double(stage_qp.STATIONARY_TOLERANCE),
         "RELAX_STEPS": ", ".join(c_double(step) for step in lexicographic.RELAX_STEPS),
         "RELAX_TRIES": len(lexicographic.RELAX_STEPS),
         "SPARE_VARIABLES": int(controller.law.spare_variables),
-        "FEASIBILITY_TOLERANCE": c_double(lexicographic.FEASIBILITY_TOLERANCE),
+        "FEASIBILITY_TOLERANCE": c_double(stage_qp.FEASIBILITY_TOLERANCE),
         "MAX_EXTRAPOLATION": c_double(lexicographic.MAX_EXTRAPOLATION),
         "EXTRAPOLATION_MARGIN": c_double(lexicographic.EXTRAPOLATION_MARGIN),
         "RELAX_MARGIN": c_double(lexicographic.RELAX_MARGIN),
         "SLIVER_WIDENING": c_double(lexicographic.SLIVER_WIDENING),
-        "CONSTANT_ROW": c_double(lexicographic.CONSTANT_ROW),
+        "CONSTANT_ROW": c_double(stage_qp.CONSTANT_ROW),
         "FACE_TOLERANCE": c_double(lexicographic.FACE_TOLERANCE),
         "INDEPENDENT_ROW": c_double(lexicographic.INDEPENDENT_ROW),
         "OPT_ACTIVE": c_double(optimality.ACTIVE),

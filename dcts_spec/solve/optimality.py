@@ -22,7 +22,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .lexicographic import Structure, constant_rows
+from .lexicographic import Structure
+from .stage_qp import constant_rows
 
 # A constraint is active within this much of its bound, relative to max(1, the sum of the
 # magnitudes of the terms its value adds up: its rounding's scale), or beyond it. DAQP's answers

@@ -16,7 +16,8 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
-from .lexicographic import Structure, check_bounds, solve_lexicographic
+from .bound_check import check_bounds
+from .lexicographic import Structure, solve_lexicographic
 from .optimality import to_optimum
 
 ROUNDING = 1e-14  # relative change of each entry of the QP data, about what separates the runtimes

@@ -1,0 +1,220 @@
+"""One QP of the lexicographic cascade: its fixed variables eliminated, solved by DAQP, its answer
+checked on its own rows and, where DAQP's active rows allow, certified to minimize a stage's
+objective (`certificate`). The cascade (`lexicographic.py`) decides which QPs to pose; this module
+poses one. The generated C does the same (`ctl_daqp`, `ctl_stationary`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import daqp
+import numpy as np
+
+# Both runtimes: a primal tolerance tighter than DAQP's 1e-6, so that bounds hold to ~1e-8 in
+# the scaled problem; a bounded iteration count; no elimination of equalities (it allocates);
+# a working set called singular only where its pivot (of unit-norm rows, refined by DAQP from an
+# explicit residual where rounding could dominate it) is below 1e-14, the accuracy DAQP's own
+# branch and bound gives pivots, not 3.7e-11. After a relaxation the feasible set is a sliver
+# around the least violation, whose active rows are nearly dependent: at the default, DAQP called
+# a feasible bend stage infeasible from a cold start, and solved it from C's warm one (TIAGo Pro,
+# 23 joints: C and Python parted by 0.81 on a golden vector); over 574 relaxed states of that
+# spec, every stage after the relaxation failed in 45 states at the default, in 1 at 1e-14.
+DAQP_SETTINGS = {"primal_tol": 1e-8, "iter_limit": 1000, "eq_reduction": -1, "sing_tol": 1e-14}
+DAQP_INF = 1e30  # DAQP's "no bound"
+# Every QP's answer is checked on its own rows (relative to max(1, |bound|)): DAQP's "optimal" flag
+# is not evidence. A bend stage's Hessian I + I/ρ (condition 1e5) once came back "optimal" with a
+# torque row crossed by 0.054 Nm; such an answer counts as a failed solve.
+FEASIBILITY_TOLERANCE = 1e-7
+# A row of a QP with fixed variables eliminated whose free coefficients are at most this times its
+# largest one sees no free variable (FixedEliminated): its rounding residue is ~1e-16 with a null
+# space basis, but up to ~1e-12 with a run-time activation's N_k z (N_k is formed from products of
+# larger entries). At 1e-12, the acceleration bound of a joint the levels above fix kept free
+# coefficients of 1.6e-12 and was crossed by 2.9e-10 through rounding; DAQP then called the
+# final QP infeasible, and the lowest level's least squares was not applied (a 26-joint Centauro:
+# 5.8 Nm from the same spec without the activation).
+CONSTANT_ROW = 1e-10
+# A stage's answer is certified optimal (`stationary`) if its KKT residual on DAQP's active rows is
+# at most this much of the stage's gradient: rounding leaves ~1e-15, an iterate still moving more.
+STATIONARY_TOLERANCE = 1e-10
+
+
+def clip_to_daqp(values: np.ndarray, out: np.ndarray) -> None:
+    """`values` within DAQP's ±DAQP_INF, written into `out`: np.clip's numbers without its
+    Python-level overhead (the cascade clips the variable bounds of every QP)."""
+    np.minimum(np.maximum(values, -DAQP_INF, out=out), DAQP_INF, out=out)
+
+
+@dataclass(frozen=True)
+class FixedEliminated:
+    """A QP's rows and bounds with its fixed variables (equal bounds: the levels a stage holds)
+    eliminated: DAQP solves for the free ones, min ½x_fᵀH_ff x_f + (f_f + H_fc x_c)ᵀx_f with the
+    rows shifted by A_c x_c. The same solution (H is positive definite), but DAQP's setup (the
+    Cholesky of H, A R⁻¹) and working set shrink from every variable to the 2–3 a stage leaves
+    free, instead of holding the others (7 of the bench spec's 9) as equalities.
+
+    A row that sees no free variable (`constant_rows`) has a value the QP cannot change: DAQP gets
+    it without bounds, and the caller's check of every row on the answer decides whether it holds.
+    Given to DAQP, such a row is a "zero row" it calls infeasible when 0 is outside its shifted
+    bounds by more than 1e-11, absolute: after a bend, a row at its bound with fixed variables of
+    ~1e5 is off by rounding more than that, and C and Python parted (one called the final QP
+    infeasible, the other not; a 16-joint hand with 4 levels)."""
+
+    free: np.ndarray  # indices of the free variables
+    point: np.ndarray  # the fixed variables' values, 0 at the free ones
+    A: np.ndarray  # A's columns of the free variables
+    lower: np.ndarray  # DAQP's bounds: [x_f; A_f x_f]
+    upper: np.ndarray
+    hessian_index: tuple[np.ndarray, np.ndarray]  # H_ff = H[hessian_index]
+    rows: np.ndarray  # [I; A_f]: DAQP's rows in the free variables, bounds first (`stationary`)
+    row_norms: np.ndarray
+
+    @classmethod
+    def of(cls, A: np.ndarray, lower: np.ndarray, upper: np.ndarray,
+           layouts: dict[bytes, tuple] | None = None) -> FixedEliminated:
+        """`lower ≤ [x; Ax] ≤ upper` (within ±DAQP_INF, `clip_to_daqp`) with the fixed variables out.
+        `layouts`: what depends only on which variables are fixed, kept across calls on the same A
+        (a cascade's stages fix a few sets of variables over and over)."""
+        n = A.shape[1]
+        fixed = lower[:n] == upper[:n]
+        key = fixed.tobytes()
+        layout = None if layouts is None else layouts.get(key)
+        if layout is None:
+            free = np.flatnonzero(~fixed)
+            A_free = np.ascontiguousarray(A[:, free])
+            rows = np.vstack((np.eye(free.size), A_free))
+            layout = (free, A_free, np.ix_(free, free), np.flatnonzero(constant_rows(A, A_free)), rows,
+                      np.sqrt((rows * rows).sum(axis=1)))
+            if layouts is not None:
+                layouts[key] = layout
+        free, A_free, index, constant, rows, row_norms = layout
+        if free.size == n:
+            point = np.zeros(n)
+        else:
+            point = np.where(fixed, lower[:n], 0.0)  # (0 at the free variables: A x sees the fixed ones only)
+            shift = A @ point
+            lower = np.concatenate((lower[free], lower[n:] - shift))
+            upper = np.concatenate((upper[free], upper[n:] - shift))
+        if constant.size:  # (rows of A; in DAQP's [x_f; A_f x_f] after the free variables)
+            lower, upper = lower.copy(), upper.copy()
+            lower[free.size + constant], upper[free.size + constant] = -DAQP_INF, DAQP_INF
+        return cls(free, point, A_free, lower, upper, index, rows, row_norms)
+
+    def widened(self, relative: float) -> FixedEliminated:
+        """The same QP with every inequality row (not the variables' bounds, nor an equality)
+        widened by `relative` × max(1, |bound|) at each end."""
+        lower, upper = self.lower.copy(), self.upper.copy()
+        rows = np.arange(self.free.size, lower.size)
+        inequality = rows[lower[rows] != upper[rows]]
+        margin = relative * np.maximum(1.0, np.minimum(np.abs(lower[inequality]), np.abs(upper[inequality])))
+        lower[inequality] = np.maximum(lower[inequality] - margin, -DAQP_INF)
+        upper[inequality] = np.minimum(upper[inequality] + margin, DAQP_INF)
+        return FixedEliminated(self.free, self.point, self.A, lower, upper, self.hessian_index, self.rows, self.row_norms)
+
+
+def outside_tolerance(value: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
+    """Which values cross their bounds by more than FEASIBILITY_TOLERANCE, relative to
+    max(1, min(|lower|, |upper|)): the check of every answer (`Cascade._holds`)."""
+    excess = np.maximum(lower - value, value - upper)
+    return excess > FEASIBILITY_TOLERANCE * np.maximum(1.0, np.minimum(np.abs(lower), np.abs(upper)))
+
+
+def constant_rows(A: np.ndarray, A_free: np.ndarray) -> np.ndarray:
+    """The rows whose coefficients of the free variables are nothing but rounding: at most
+    CONSTANT_ROW × the row's largest coefficient (all zero in exact arithmetic, ~1e-16 relative
+    in the QP data)."""
+    return np.abs(A_free).max(axis=1, initial=0.0) <= CONSTANT_ROW * np.abs(A).max(axis=1, initial=0.0)
+
+
+def daqp_qp(H: np.ndarray, f: np.ndarray, qp: FixedEliminated) -> tuple[np.ndarray | None, int, np.ndarray]:
+    """One ordinary QP: min ½xᵀHx + fᵀx on the rows and bounds of `qp` (equal ends: an equality),
+    solved by DAQP for the free variables. Returns x (None if DAQP found no solution), its exit
+    flag and DAQP's multipliers of `qp`'s rows (`stationary` reads them); with no variable free,
+    the fixed point, for the caller's check of the rows."""
+    free = qp.free
+    if free.size == f.size:
+        return _daqp(H, f, qp)
+    x = qp.point.copy()
+    if not free.size:
+        return x, 1, np.zeros(qp.lower.size)
+    solved, flag, multipliers = _daqp(H[qp.hessian_index], (f + H @ x)[free], qp)
+    if solved is None:
+        return None, flag, multipliers
+    x[free] = solved
+    return x, flag, multipliers
+
+
+def _daqp(H: np.ndarray, f: np.ndarray, qp: FixedEliminated) -> tuple[np.ndarray | None, int, np.ndarray]:
+    # (no sense: DAQP takes the rows with equal ends for equalities itself, as in the C runtime)
+    x, _, flag, info = daqp.solve(np.ascontiguousarray(H), np.ascontiguousarray(f), qp.A, qp.upper, qp.lower,
+                                  **DAQP_SETTINGS)
+    if flag != 1 or not np.isfinite(x).all():
+        return None, int(flag), info["lam"]
+    return np.asarray(x, dtype=float), int(flag), info["lam"]
+
+
+def stationary(qp: FixedEliminated, multipliers: np.ndarray, gradient: np.ndarray) -> bool:
+    """Does the answer DAQP gave for `qp` minimize a convex φ (its `gradient` ∇φ there, over every
+    variable) on the same set? A stage whose iterate passes needs no further QP to confirm it; one
+    that does not goes on as before (the certificate can only be too strict: degenerate active
+    rows, a multiplier DAQP left out)."""
+    return certificate(qp, multipliers, gradient) is not None
+
+
+def certificate(qp: FixedEliminated, multipliers: np.ndarray, gradient: np.ndarray) -> np.ndarray | None:
+    """The rows of `qp` (its variables' bounds first, as DAQP numbers them) that certify its answer
+    minimizes a convex φ (its `gradient` ∇φ there, over every variable), or None if DAQP's active
+    rows (multipliers ≠ 0) do not: ∇φ + Cᵀμ = 0 in the free variables, with each inequality's μ on
+    the side DAQP found it active (λ > 0 upper, λ < 0 lower). μ by least squares on those rows;
+    STATIONARY_TOLERANCE bounds the residual relative to ∇φ, and a row is in the certificate if
+    its |μ|‖row‖ is above that much of ∇φ. Every minimizer of φ has those rows active
+    (complementary slackness: `Cascade._hold_face`)."""
+    g = gradient[qp.free]
+    size = math.sqrt(g.dot(g))
+    active = multipliers.nonzero()[0]
+    if not active.size:
+        return active if size == 0.0 else None  # (the residual is ∇φ itself)
+    if active.size > g.size:  # (dependent rows)
+        return None
+    C = qp.rows[active]
+    mu = cholesky_solve(C @ C.T, -(C @ g))
+    if mu is None:
+        return None
+    inequality = qp.lower[active] != qp.upper[active]
+    significant = np.abs(mu) * qp.row_norms[active] > STATIONARY_TOLERANCE * size
+    if (inequality & (mu * multipliers[active] < 0) & significant).any():  # (on the wrong side)
+        return None
+    residual = g + C.T @ mu
+    return active[significant] if math.sqrt(residual.dot(residual)) <= STATIONARY_TOLERANCE * size else None
+
+
+# Up to this many active rows the certificate's Cholesky runs in plain Python, as ctl_stationary
+# does it: NumPy's Cholesky and solve cost ~15 µs each on the 2–6 rows a stage's certificate has,
+# the loops a few µs. They grow as k³ in the interpreter: the relaxation's stages of a 27-joint
+# robot hold ~50 rows active, and there the loops took 3/4 of a compile (its golden vectors).
+PLAIN_CHOLESKY_ROWS = 12
+
+
+def cholesky_solve(G: np.ndarray, b: np.ndarray) -> np.ndarray | None:
+    """x with G x = b for a symmetric G, by its Cholesky factor (None if a pivot is not positive)."""
+    k = len(b)
+    if k > PLAIN_CHOLESKY_ROWS:
+        try:
+            low = np.linalg.cholesky(G)
+        except np.linalg.LinAlgError:
+            return None
+        return np.linalg.solve(low.T, np.linalg.solve(low, b))
+    G, b = G.tolist(), b.tolist()
+    for j in range(k):
+        pivot = G[j][j] - sum(G[j][c] * G[j][c] for c in range(j))
+        if not pivot > 0.0:
+            return None
+        G[j][j] = math.sqrt(pivot)
+        for i in range(j + 1, k):
+            G[i][j] = (G[i][j] - sum(G[i][c] * G[j][c] for c in range(j))) / G[j][j]
+    for j in range(k):  # L y = b, then Lᵀ x = y
+        b[j] = (b[j] - sum(G[j][c] * b[c] for c in range(j))) / G[j][j]
+    for j in reversed(range(k)):
+        b[j] = (b[j] - sum(G[c][j] * b[c] for c in range(j + 1, k))) / G[j][j]
+    return np.array(b)
