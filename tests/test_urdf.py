@@ -217,6 +217,36 @@ scenario:
     assert np.isfinite(log.tau).all() and np.abs(log.tau_ext_true).max() > 0  # (the push reached the tool)
 
 
+def test_a_locked_joint_named_as_a_link_is_locked(tmp_path):
+    """A joint named as a link, locked (the SO-100's `gripper`, found from outside): Pinocchio's
+    reduction looks the joint's frame up by its name, which was the link's too, and `dcts validate`
+    exited with an internal error (3). Locked, the model is the one whose joint has a name of its
+    own, locked at the same angle; the link keeps the name."""
+    def spec_with(urdf: str, joint: str, name: str) -> Path:
+        path = tmp_path / f"{name}.urdf"
+        path.write_text(urdf)
+        spec = tmp_path / f"{name}.yaml"
+        spec.write_text(f"""version: 1
+name: {name}
+robot:
+  urdf: {path.name}
+  locked_joints: {{{joint}: 0.3}}
+tasks:
+  - {{name: tool, type: position, frame: hand, axes: [x], priority: 1, gains: {{kp: 100, kd: 20}},
+     reference: {{position: [0.1, 0.0, 0.0]}}}}
+""")
+        return spec
+
+    alike = validate_spec(load_spec(spec_with(URDF.replace('joint name="wrist_roll"', 'joint name="hand"'), "hand", "alike")))
+    own = validate_spec(load_spec(spec_with(URDF, "wrist_roll", "own")))
+    model, reference = alike.robot.model, own.robot.model
+    assert model.nv == reference.nv == 2
+    assert model.frames[model.getFrameId("hand")].type == pin.FrameType.BODY
+    q = np.array([0.4, -0.7])
+    assert np.array_equal(pin.crba(model, model.createData(), q), pin.crba(reference, reference.createData(), q))
+    assert build_controller(alike.spec).step(q, np.zeros(2), np.zeros(2)).status == 0
+
+
 @pytest.mark.parametrize(("limit", "severity", "words"), [
     ('<limit lower="-2" upper="2" velocity="2"/>', "error", "joint shoulder (revolute) has no effort"),
     ('<limit lower="-2" upper="2"/>', "error", "joint shoulder (revolute) has no effort or velocity"),

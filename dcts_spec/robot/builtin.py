@@ -58,7 +58,25 @@ def lock_joints(model: pin.Model, locked: dict[str, float]) -> pin.Model:
             raise KeyError(f"joint {name!r} to lock is not in the model")
         q_ref[model.joints[jid].idx_q] = value
         ids.append(jid)
-    return pin.buildReducedModel(model, ids, q_ref)
+    # Pinocchio's reduction finds each locked joint's frame by the joint's name, and raises where
+    # another frame has it too (SO-100: a link and a joint `gripper`; `unique_frame_names` renamed
+    # the joint's frame): for the while, that frame gets the joint's name and the others another
+    model = pin.Model(model)
+    original: dict[str, str] = {}
+    for jid in ids:
+        name = model.names[jid]
+        for i, frame in enumerate(model.frames):
+            own = frame.type == pin.FrameType.JOINT and frame.parentJoint == jid
+            if own == (frame.name == name):
+                continue
+            temporary = name if own else f"{frame.name}#{i}"
+            original[temporary] = frame.name
+            model.frames[i].name = temporary
+    reduced = pin.buildReducedModel(model, ids, q_ref)
+    for i, frame in enumerate(reduced.frames):
+        if frame.name in original:
+            reduced.frames[i].name = original[frame.name]
+    return reduced
 
 
 def load_builtin_model(name: str) -> pin.Model:
