@@ -315,13 +315,17 @@ class Controller:
         return rounding_spread(*self._qp(data), self._structure, x, outputs, samples, enough, acceleration_map=data["Q"])
 
     def _binding(self, data: dict[str, np.ndarray], x: np.ndarray) -> bool:
-        """Does a torque limit or a joint/Cartesian bound bind at x?"""
+        """Does a torque limit or a joint/Cartesian bound bind at x: is a row within ACTIVE_TOLERANCE
+        of a bound, or beyond it? (Beyond: a relaxed answer. Counted only within the tolerance, a
+        relaxed step whose crossed rows all missed it by more reported its over-constrained
+        lowest level met, s = 1, where the other runtime's rounding left one row on its bound: a
+        Kinova's golden vector, 1 against 0.)"""
         qp = self.law.qp
         end = qp.rows_of(BOUNDS).stop
         value = data["A"][:end] @ x
         lo, hi = data["lba"].ravel()[:end], data["uba"].ravel()[:end]
-        return bool(np.any(np.minimum(np.abs(value - lo), np.abs(hi - value)) <=
-                           ACTIVE_TOLERANCE * np.maximum(1.0, np.minimum(np.abs(lo), np.abs(hi)))))
+        tolerance = ACTIVE_TOLERANCE * np.maximum(1.0, np.minimum(np.abs(lo), np.abs(hi)))
+        return bool(np.any((value - lo <= tolerance) | (hi - value <= tolerance)))
 
     def _least_squares_scaling(self, data: dict[str, np.ndarray], x: np.ndarray) -> float:
         if not self._binding(data, x):
