@@ -35,6 +35,13 @@ FEASIBILITY_TOLERANCE = 1e-7
 # final QP infeasible, and the lowest level's least squares was not applied (a 26-joint Centauro:
 # 5.8 Nm from the same spec without the activation).
 CONSTANT_ROW = 1e-10
+# A row whose largest coefficient is below this goes to DAQP divided by it (its bounds too: the
+# same set). DAQP takes a row of its LDP whose squared norm is below its zero_tol (1e-11) for a
+# zero row, and calls the QP infeasible if 0 is outside the row's bounds: an SO-100 torque row of
+# a 0.05 Nm wrist, 2.7e-6 in the scaled variables of a stage (H = I), 2.4e-3 from 0, made every
+# QP of a feasible state infeasible, its relaxation's too, and the step fell back (status -2;
+# found from outside). DAQP normalizes every other row itself.
+ROW_FLOOR = 1e-4
 # A stage's answer is certified optimal (`stationary`) if its KKT residual on DAQP's active rows is
 # at most this much of the stage's gradient: rounding leaves ~1e-15, an iterate still moving more.
 STATIONARY_TOLERANCE = 1e-10
@@ -69,6 +76,8 @@ class FixedEliminated:
     hessian_index: tuple[np.ndarray, np.ndarray]  # H_ff = H[hessian_index]
     rows: np.ndarray  # [I; A_f]: DAQP's rows in the free variables, bounds first (`stationary`)
     row_norms: np.ndarray
+    # each row's factor (ROW_FLOOR): A_f and its bounds here are multiplied by it; None if all are 1
+    row_scale: np.ndarray | None = None
 
     @classmethod
     def of(cls, A: np.ndarray, lower: np.ndarray, upper: np.ndarray,
@@ -83,12 +92,16 @@ class FixedEliminated:
         if layout is None:
             free = np.flatnonzero(~fixed)
             A_free = np.ascontiguousarray(A[:, free])
+            constant = constant_rows(A, A_free)
+            row_scale = _row_scale(A, constant)
+            if row_scale is not None:
+                A_free = A_free * row_scale[:, None]
             rows = np.vstack((np.eye(free.size), A_free))
-            layout = (free, A_free, np.ix_(free, free), np.flatnonzero(constant_rows(A, A_free)), rows,
-                      np.sqrt((rows * rows).sum(axis=1)))
+            layout = (free, A_free, np.ix_(free, free), np.flatnonzero(constant), rows,
+                      np.sqrt((rows * rows).sum(axis=1)), row_scale)
             if layouts is not None:
                 layouts[key] = layout
-        free, A_free, index, constant, rows, row_norms = layout
+        free, A_free, index, constant, rows, row_norms, row_scale = layout
         if free.size == n:
             point = np.zeros(n)
         else:
@@ -96,10 +109,14 @@ class FixedEliminated:
             shift = A @ point
             lower = np.concatenate((lower[free], lower[n:] - shift))
             upper = np.concatenate((upper[free], upper[n:] - shift))
+        if row_scale is not None:  # (a row's bounds in its units; beyond ±DAQP_INF: none)
+            lower, upper = lower.copy(), upper.copy()
+            clip_to_daqp(lower[free.size:] * row_scale, lower[free.size:])
+            clip_to_daqp(upper[free.size:] * row_scale, upper[free.size:])
         if constant.size:  # (rows of A; in DAQP's [x_f; A_f x_f] after the free variables)
             lower, upper = lower.copy(), upper.copy()
             lower[free.size + constant], upper[free.size + constant] = -DAQP_INF, DAQP_INF
-        return cls(free, point, A_free, lower, upper, index, rows, row_norms)
+        return cls(free, point, A_free, lower, upper, index, rows, row_norms, row_scale)
 
     def widened(self, relative: float) -> FixedEliminated:
         """The same QP with every inequality row (not the variables' bounds, nor an equality)
@@ -110,7 +127,19 @@ class FixedEliminated:
         margin = relative * np.maximum(1.0, np.minimum(np.abs(lower[inequality]), np.abs(upper[inequality])))
         lower[inequality] = np.maximum(lower[inequality] - margin, -DAQP_INF)
         upper[inequality] = np.minimum(upper[inequality] + margin, DAQP_INF)
-        return FixedEliminated(self.free, self.point, self.A, lower, upper, self.hessian_index, self.rows, self.row_norms)
+        return FixedEliminated(self.free, self.point, self.A, lower, upper, self.hessian_index, self.rows, self.row_norms,
+                               self.row_scale)
+
+
+def _row_scale(A: np.ndarray, constant: np.ndarray) -> np.ndarray | None:
+    """Each row's factor for DAQP: 1/(its largest |coefficient|) where that is below ROW_FLOOR (a
+    row small as a whole: its units; not one that barely sees the free variables, whose small
+    coefficients are partly rounding), 1 elsewhere and on the constant rows; None if all are 1."""
+    size = np.abs(A).max(axis=1, initial=0.0)
+    small = (size < ROW_FLOOR) & (size > 0.0) & ~constant
+    if not small.any():
+        return None
+    return np.where(small, 1.0 / np.where(small, size, 1.0), 1.0)
 
 
 def outside_tolerance(value: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
