@@ -1257,6 +1257,64 @@ def test_a_light_wrist_is_solved_as_the_reference_solves_it(name):
         assert np.linalg.norm(ours - achieved) <= 1e-6 * max(1.0, np.linalg.norm(achieved))
 
 
+
+KINOVA_SPEC = f"""
+version: 1
+name: kinova_payload
+robot: {{urdf: {example_robot_data_dir() / "kinova_description" / "robots" / "kinova.urdf"}}}
+limits:
+  joint_acceleration: {{max: 30}}
+  joint_torque: {{max: [30, 60, 30, 15, 15, 15]}}
+  cartesian:
+    - {{frame: j2s6s200_end_effector, axis: z, min: 0.35}}
+    - {{frame: j2s6s200_end_effector, axis: x, max: -0.05}}
+controller: {{formulation: dcts, external_torque: measured}}
+tasks:
+  - {{name: reach, type: position, frame: j2s6s200_end_effector, priority: 1, gains: {{kp: 80, kd: 18}},
+     reference: {{position: [0.10, -0.35, 0.20]}}}}
+  - {{name: point, type: orientation, frame: j2s6s200_end_effector, axes: [rx, ry], priority: 2,
+     gains: {{kp: 60, kd: 15}}, reference: {{rpy: [180, 0, 0], unit: deg}}}}
+  - {{name: wrist, type: joint, joints: [j2s6s200_joint_6], priority: 3, gains: {{kp: 10, kd: 6}}, reference: {{q: [0.5]}}}}
+scenario: {{duration: 1.0, initial_q: [0, 2.9, 1.0, -2.0, 1.4, 1.3]}}
+"""
+# two closed-loop states 2.5e-12 apart, from the C and the Python runtime's run of a payload
+# scenario of that spec (t = 0.538 s), after which the runs parted by 30 Nm
+KINOVA_STATES = [
+    ([-0.3292965074204309, 3.2282979053591014, 1.0798332527438859, -2.440011162715497, 1.5008232766236995, 1.185255862299797],
+     [-0.5736296003813529, 0.2747813005170124, 0.41957052156946817, -0.8372727658751375, 0.8332766949525696,
+      0.7469538529208793],
+     [-0.10351613849545427, 3.6259347608255723, -2.9162882279703037, -3.7468923219156385, 3.4857437846249084,
+      0.3461608371987478]),
+    ([-0.3292965074191897, 3.2282979053616154, 1.0798332527454522, -2.440011162716336, 1.5008232766219716, 1.1852558622987217],
+     [-0.5736296003807675, 0.2747813005024505, 0.4195705215711372, -0.8372727658752719, 0.8332766949570338,
+      0.7469538529336862],
+     [-0.1035161384828246, 3.6259347608380086, -2.9162882279696767, -3.746892321915026, 3.4857437846404706,
+      0.3461608372005622]),
+]
+
+
+@pytest.mark.parametrize("state", [0, 1])
+def test_a_row_daqp_would_take_for_zero_does_not_fail_the_stages(state):
+    """After the top level's bend, a Cartesian bound's free coefficients are 1.5e-9 (not constant by
+    CONSTANT_ROW) and its shifted bound 1.4e-10 from 0: DAQP took it for a zero row and called every
+    stage below infeasible in the first state, the bend's iterate became the answer, and the
+    orientation level got s = 0 where the reference gives 0.111 (status 0; in the second state,
+    2.5e-12 away, it got 0.111). Every level agrees with the reference in both."""
+    spec = load_spec_text(KINOVA_SPEC, "kinova.yaml")
+    controller = Controller(spec, validate_spec(spec).robot)
+    q, dq, tau_ext = (np.array(v) for v in KINOVA_STATES[state])
+    result = controller.step(q, dq, tau_ext)
+    assert result.status == 0
+    assert result.scaling[1] == pytest.approx(0.11103, abs=1e-5)
+    tasks = numeric_tasks(controller.spec, controller.robot.joint_names)
+    reference = lexicographic_solution(controller.robot, tasks, q, dq, tau_ext, controller.problem.period)
+    assert reference.feasible
+    M, _, _ = dynamics(controller.robot.model, q, dq)
+    a = result.ddq + np.linalg.solve(M, tau_ext)
+    for level, achieved in zip(task_levels(controller.robot.model, tasks, q, dq), reference.achieved, strict=True):
+        ours = level.J @ a + level.bias
+        assert np.linalg.norm(ours - achieved) <= 1e-6 * max(1.0, np.linalg.norm(achieved))
+
 @pytest.mark.skipif(not os.environ.get("DCTS_SLOW"), reason="builds a C bundle (~15 s): set DCTS_SLOW=1 to run it")
 def test_a_light_wrist_is_solved_alike_in_c(tmp_path, monkeypatch):
     """The C runtime at SO100_STATES: the same status, scalings and torques (its rows go to DAQP
@@ -1267,6 +1325,24 @@ def test_a_light_wrist_is_solved_alike_in_c(tmp_path, monkeypatch):
     spec = load_spec_text(SO100_SPEC, "so100.yaml")
     python, compiled = dcts_spec.build_controller(spec), dcts_spec.compile_c(spec, tmp_path / "bundle")
     for q, dq, tau_ext in SO100_STATES.values():
+        python.reset()
+        compiled.reset()
+        expected, got = python.step(q, dq, tau_ext), compiled.step(q, dq, tau_ext)
+        assert got.status == expected.status == 0
+        np.testing.assert_allclose(got.scaling, expected.scaling, rtol=1e-6, atol=1e-9)
+        np.testing.assert_allclose(got.tau, expected.tau, rtol=1e-6, atol=1e-8)
+
+
+@pytest.mark.skipif(not os.environ.get("DCTS_SLOW"), reason="builds a C bundle (~15 s): set DCTS_SLOW=1 to run it")
+def test_a_row_daqp_would_take_for_zero_is_constant_in_c_too(tmp_path, monkeypatch):
+    """The C runtime at KINOVA_STATES: the same status, scalings and torques (ctl_daqp gives such
+    rows no bounds, as FixedEliminated does)."""
+    import dcts_spec
+
+    monkeypatch.setenv("DCTS_CACHE_DIR", str(tmp_path / "cache"))
+    spec = load_spec_text(KINOVA_SPEC, "kinova.yaml")
+    python, compiled = dcts_spec.build_controller(spec), dcts_spec.compile_c(spec, tmp_path / "bundle")
+    for q, dq, tau_ext in KINOVA_STATES:
         python.reset()
         compiled.reset()
         expected, got = python.step(q, dq, tau_ext), compiled.step(q, dq, tau_ext)

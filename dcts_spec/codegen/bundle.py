@@ -657,6 +657,7 @@ def generate_sources(
         "SLIVER_WIDENING": c_double(lexicographic.SLIVER_WIDENING),
         "CONSTANT_ROW": c_double(stage_qp.CONSTANT_ROW),
         "ROW_FLOOR": c_double(stage_qp.ROW_FLOOR),
+        "DAQP_ZERO_TOL": c_double(stage_qp.DAQP_ZERO_TOL),
         "FACE_TOLERANCE": c_double(lexicographic.FACE_TOLERANCE),
         "INDEPENDENT_ROW": c_double(lexicographic.INDEPENDENT_ROW),
         "OPT_ACTIVE": c_double(optimality.ACTIVE),

@@ -35,6 +35,14 @@ FEASIBILITY_TOLERANCE = 1e-7
 # final QP infeasible, and the lowest level's least squares was not applied (a 26-joint Centauro:
 # 5.8 Nm from the same spec without the activation).
 CONSTANT_ROW = 1e-10
+# DAQP's zero_tol (its default; not set): a row of its LDP whose squared norm is below it is a "zero
+# row", and DAQP calls the QP infeasible if 0 is outside the row's bounds by more than that. A row
+# of a QP's free variables that small goes to DAQP as a constant row (no bounds; the check of every
+# row on the answer decides): a Kinova's Cartesian bound, its free coefficients 1.5e-9 after a
+# bend fixed the level above (1.5e-9 of its largest: not constant by CONSTANT_ROW), its shifted
+# bound 1.4e-10 from 0, made DAQP call every stage below infeasible; the bend's iterate became the
+# answer, and a level the reference scales to 0.111 got 0 (status "ok"; found from outside).
+DAQP_ZERO_TOL = 1e-11
 # A row whose largest coefficient is below this goes to DAQP divided by it (its bounds too: the
 # same set). DAQP takes a row of its LDP whose squared norm is below its zero_tol (1e-11) for a
 # zero row, and calls the QP infeasible if 0 is outside the row's bounds: an SO-100 torque row of
@@ -96,6 +104,7 @@ class FixedEliminated:
             row_scale = _row_scale(A, constant)
             if row_scale is not None:
                 A_free = A_free * row_scale[:, None]
+            constant |= _daqp_zero_rows(A_free)
             rows = np.vstack((np.eye(free.size), A_free))
             layout = (free, A_free, np.ix_(free, free), np.flatnonzero(constant), rows,
                       np.sqrt((rows * rows).sum(axis=1)), row_scale)
@@ -129,6 +138,15 @@ class FixedEliminated:
         upper[inequality] = np.minimum(upper[inequality] + margin, DAQP_INF)
         return FixedEliminated(self.free, self.point, self.A, lower, upper, self.hessian_index, self.rows, self.row_norms,
                                self.row_scale)
+
+
+def _daqp_zero_rows(A_free: np.ndarray) -> np.ndarray:
+    """The rows DAQP would take for zero rows: their free coefficients' squared norm below
+    DAQP_ZERO_TOL (summed in row order, as the C sums it)."""
+    zero = np.zeros(A_free.shape[0], dtype=bool)
+    for j in np.flatnonzero((A_free * A_free).max(axis=1, initial=0.0) < DAQP_ZERO_TOL):
+        zero[j] = sum(v * v for v in A_free[j].tolist()) < DAQP_ZERO_TOL
+    return zero
 
 
 def _row_scale(A: np.ndarray, constant: np.ndarray) -> np.ndarray | None:
