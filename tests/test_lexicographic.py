@@ -1242,19 +1242,7 @@ SO100_STATES = {
 def test_a_light_wrist_is_solved_as_the_reference_solves_it(name):
     """An SO-100 (wrist roll 1e-4 kg·m², torque limits down to 0.02 Nm) at two states found from
     outside against the reference (see SO100_STATES): status 0, and every level agrees with it."""
-    spec = load_spec_text(SO100_SPEC, "so100.yaml")
-    controller = Controller(spec, validate_spec(spec).robot)
-    q, dq, tau_ext = (np.array(v) for v in SO100_STATES[name])
-    result = controller.step(q, dq, tau_ext)
-    assert result.status == 0
-    tasks = numeric_tasks(controller.spec, controller.robot.joint_names)
-    reference = lexicographic_solution(controller.robot, tasks, q, dq, tau_ext, controller.problem.period)
-    assert reference.feasible
-    M, _, _ = dynamics(controller.robot.model, q, dq)
-    a = result.ddq + np.linalg.solve(M, tau_ext)
-    for level, achieved in zip(task_levels(controller.robot.model, tasks, q, dq), reference.achieved, strict=True):
-        ours = level.J @ a + level.bias
-        assert np.linalg.norm(ours - achieved) <= 1e-6 * max(1.0, np.linalg.norm(achieved))
+    _solved_as_the_reference(SO100_SPEC, SO100_STATES[name])
 
 
 
@@ -1300,12 +1288,32 @@ def test_a_row_daqp_would_take_for_zero_does_not_fail_the_stages(state):
     stage below infeasible in the first state, the bend's iterate became the answer, and the
     orientation level got s = 0 where the reference gives 0.111 (status 0; in the second state,
     2.5e-12 away, it got 0.111). Every level agrees with the reference in both."""
-    spec = load_spec_text(KINOVA_SPEC, "kinova.yaml")
+    result = _solved_as_the_reference(KINOVA_SPEC, KINOVA_STATES[state])
+    assert result.scaling[1] == pytest.approx(0.11103, abs=1e-5)
+
+
+@pytest.mark.skipif(not os.environ.get("DCTS_SLOW"), reason="builds a C bundle (~15 s): set DCTS_SLOW=1 to run it")
+def test_a_light_wrist_is_solved_alike_in_c(tmp_path, monkeypatch):
+    """The C runtime at SO100_STATES: the same status, scalings and torques (its rows go to DAQP
+    scaled as the Python runtime's, ctl_daqp)."""
+    _same_in_c(SO100_SPEC, SO100_STATES.values(), tmp_path, monkeypatch)
+
+
+@pytest.mark.skipif(not os.environ.get("DCTS_SLOW"), reason="builds a C bundle (~15 s): set DCTS_SLOW=1 to run it")
+def test_a_row_daqp_would_take_for_zero_is_constant_in_c_too(tmp_path, monkeypatch):
+    """The C runtime at KINOVA_STATES: the same status, scalings and torques (ctl_daqp gives such
+    rows no bounds, as FixedEliminated does)."""
+    _same_in_c(KINOVA_SPEC, KINOVA_STATES, tmp_path, monkeypatch)
+
+
+def _solved_as_the_reference(spec_text: str, state) -> object:
+    """The Python runtime's step at `state` (q, q̇, τ_ext): status 0, and every level's task
+    acceleration within 1e-6 (relative) of the lexicographic reference's. Returns the step."""
+    spec = load_spec_text(spec_text, "spec.yaml")
     controller = Controller(spec, validate_spec(spec).robot)
-    q, dq, tau_ext = (np.array(v) for v in KINOVA_STATES[state])
+    q, dq, tau_ext = (np.array(v) for v in state)
     result = controller.step(q, dq, tau_ext)
     assert result.status == 0
-    assert result.scaling[1] == pytest.approx(0.11103, abs=1e-5)
     tasks = numeric_tasks(controller.spec, controller.robot.joint_names)
     reference = lexicographic_solution(controller.robot, tasks, q, dq, tau_ext, controller.problem.period)
     assert reference.feasible
@@ -1314,35 +1322,18 @@ def test_a_row_daqp_would_take_for_zero_does_not_fail_the_stages(state):
     for level, achieved in zip(task_levels(controller.robot.model, tasks, q, dq), reference.achieved, strict=True):
         ours = level.J @ a + level.bias
         assert np.linalg.norm(ours - achieved) <= 1e-6 * max(1.0, np.linalg.norm(achieved))
+    return result
 
-@pytest.mark.skipif(not os.environ.get("DCTS_SLOW"), reason="builds a C bundle (~15 s): set DCTS_SLOW=1 to run it")
-def test_a_light_wrist_is_solved_alike_in_c(tmp_path, monkeypatch):
-    """The C runtime at SO100_STATES: the same status, scalings and torques (its rows go to DAQP
-    scaled as the Python runtime's, ctl_daqp)."""
+
+def _same_in_c(spec_text: str, states, tmp_path: Path, monkeypatch) -> None:
+    """The C runtime at each state (from a reset, as the Python runtime): the same status, scalings
+    and torques."""
     import dcts_spec
 
     monkeypatch.setenv("DCTS_CACHE_DIR", str(tmp_path / "cache"))
-    spec = load_spec_text(SO100_SPEC, "so100.yaml")
+    spec = load_spec_text(spec_text, "spec.yaml")
     python, compiled = dcts_spec.build_controller(spec), dcts_spec.compile_c(spec, tmp_path / "bundle")
-    for q, dq, tau_ext in SO100_STATES.values():
-        python.reset()
-        compiled.reset()
-        expected, got = python.step(q, dq, tau_ext), compiled.step(q, dq, tau_ext)
-        assert got.status == expected.status == 0
-        np.testing.assert_allclose(got.scaling, expected.scaling, rtol=1e-6, atol=1e-9)
-        np.testing.assert_allclose(got.tau, expected.tau, rtol=1e-6, atol=1e-8)
-
-
-@pytest.mark.skipif(not os.environ.get("DCTS_SLOW"), reason="builds a C bundle (~15 s): set DCTS_SLOW=1 to run it")
-def test_a_row_daqp_would_take_for_zero_is_constant_in_c_too(tmp_path, monkeypatch):
-    """The C runtime at KINOVA_STATES: the same status, scalings and torques (ctl_daqp gives such
-    rows no bounds, as FixedEliminated does)."""
-    import dcts_spec
-
-    monkeypatch.setenv("DCTS_CACHE_DIR", str(tmp_path / "cache"))
-    spec = load_spec_text(KINOVA_SPEC, "kinova.yaml")
-    python, compiled = dcts_spec.build_controller(spec), dcts_spec.compile_c(spec, tmp_path / "bundle")
-    for q, dq, tau_ext in KINOVA_STATES:
+    for q, dq, tau_ext in states:
         python.reset()
         compiled.reset()
         expected, got = python.step(q, dq, tau_ext), compiled.step(q, dq, tau_ext)
