@@ -916,10 +916,12 @@ def test_with_a_run_time_activation_the_final_qp_is_solved(name):
 
 def test_a_final_qp_with_a_feasible_point_gets_a_widened_retry(monkeypatch):
     """The first state above with rows of free coefficients ~1e-12 left in DAQP's QP (the old
-    CONSTANT_ROW): DAQP fails its final QP, and the retry with the rows widened by 1e-10 solves it."""
+    CONSTANT_ROW, and no DAQP_ZERO_TOL, which now also keeps them out): DAQP fails its final QP,
+    and the retry with the rows widened by 1e-10 solves it."""
     from dcts_spec.solve import stage_qp
 
     monkeypatch.setattr(stage_qp, "CONSTANT_ROW", 1e-12)
+    monkeypatch.setattr(stage_qp, "DAQP_ZERO_TOL", 0.0)
     assert abs(_final_objective_gap("activation_final_qp")) <= 1e-9
     monkeypatch.setattr(stage_qp.FixedEliminated, "widened", lambda qp, relative: qp)
     assert _final_objective_gap("activation_final_qp") > 1e-3
