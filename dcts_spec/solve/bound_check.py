@@ -11,6 +11,7 @@ import numpy as np
 # to max(1, |bound|) (rad/s² or m/s²): over a 1 ms period ~5e-13 m or rad of position.
 BOUND_TOLERANCE = 1e-6
 
+
 @dataclass
 class BoundCheck:
     """Which joint/Cartesian acceleration bounds a solution crosses."""

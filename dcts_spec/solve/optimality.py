@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .lexicographic import Structure
-from .stage_qp import constant_rows
+from .stage_qp import constant_rows, row_sizes
 
 # A constraint is active within this much of its bound, relative to max(1, the sum of the
 # magnitudes of the terms its value adds up: its rounding's scale), or beyond it. DAQP's answers
@@ -126,7 +126,7 @@ class _Constraints:
         # a row that sees no free variable but through rounding (as the cascade's `constant_rows`)
         # is no constraint on them: its "normal" is noise (a Romeo row of norm 1.6e-18 in them
         # carried a multiplier, and its slack over that norm, 35, a duality gap of 2e4)
-        size[: A.shape[0]][constant_rows(A, A[:, free])] = 0.0
+        size[: A.shape[0]][constant_rows(A[:, free], row_sizes(A))] = 0.0
         return cls(free, rows, np.concatenate([lba, lbx[free]]), np.concatenate([uba, ubx[free]]), size)
 
     def values(self, A: np.ndarray, x: np.ndarray) -> np.ndarray:

@@ -84,8 +84,6 @@ class FixedEliminated:
     hessian_index: tuple[np.ndarray, np.ndarray]  # H_ff = H[hessian_index]
     rows: np.ndarray  # [I; A_f]: DAQP's rows in the free variables, bounds first (`stationary`)
     row_norms: np.ndarray
-    # each row's factor (ROW_FLOOR): A_f and its bounds here are multiplied by it; None if all are 1
-    row_scale: np.ndarray | None = None
 
     @classmethod
     def of(cls, A: np.ndarray, lower: np.ndarray, upper: np.ndarray,
@@ -100,8 +98,9 @@ class FixedEliminated:
         if layout is None:
             free = np.flatnonzero(~fixed)
             A_free = np.ascontiguousarray(A[:, free])
-            constant = constant_rows(A, A_free)
-            row_scale = _row_scale(A, constant)
+            row_size = row_sizes(A)
+            constant = constant_rows(A_free, row_size)
+            row_scale = _row_scale(row_size, constant)  # (ROW_FLOOR: A_f and its bounds times it)
             if row_scale is not None:
                 A_free = A_free * row_scale[:, None]
             constant |= _daqp_zero_rows(A_free)
@@ -118,14 +117,14 @@ class FixedEliminated:
             shift = A @ point
             lower = np.concatenate((lower[free], lower[n:] - shift))
             upper = np.concatenate((upper[free], upper[n:] - shift))
-        if row_scale is not None:  # (a row's bounds in its units; beyond ±DAQP_INF: none)
+        if row_scale is not None or constant.size:
             lower, upper = lower.copy(), upper.copy()
+        if row_scale is not None:  # (a row's bounds in its units; beyond ±DAQP_INF: none)
             clip_to_daqp(lower[free.size:] * row_scale, lower[free.size:])
             clip_to_daqp(upper[free.size:] * row_scale, upper[free.size:])
         if constant.size:  # (rows of A; in DAQP's [x_f; A_f x_f] after the free variables)
-            lower, upper = lower.copy(), upper.copy()
             lower[free.size + constant], upper[free.size + constant] = -DAQP_INF, DAQP_INF
-        return cls(free, point, A_free, lower, upper, index, rows, row_norms, row_scale)
+        return cls(free, point, A_free, lower, upper, index, rows, row_norms)
 
     def widened(self, relative: float) -> FixedEliminated:
         """The same QP with every inequality row (not the variables' bounds, nor an equality)
@@ -136,8 +135,7 @@ class FixedEliminated:
         margin = relative * np.maximum(1.0, np.minimum(np.abs(lower[inequality]), np.abs(upper[inequality])))
         lower[inequality] = np.maximum(lower[inequality] - margin, -DAQP_INF)
         upper[inequality] = np.minimum(upper[inequality] + margin, DAQP_INF)
-        return FixedEliminated(self.free, self.point, self.A, lower, upper, self.hessian_index, self.rows, self.row_norms,
-                               self.row_scale)
+        return FixedEliminated(self.free, self.point, self.A, lower, upper, self.hessian_index, self.rows, self.row_norms)
 
 
 def _daqp_zero_rows(A_free: np.ndarray) -> np.ndarray:
@@ -149,11 +147,10 @@ def _daqp_zero_rows(A_free: np.ndarray) -> np.ndarray:
     return zero
 
 
-def _row_scale(A: np.ndarray, constant: np.ndarray) -> np.ndarray | None:
-    """Each row's factor for DAQP: 1/(its largest |coefficient|) where that is below ROW_FLOOR (a
-    row small as a whole: its units; not one that barely sees the free variables, whose small
-    coefficients are partly rounding), 1 elsewhere and on the constant rows; None if all are 1."""
-    size = np.abs(A).max(axis=1, initial=0.0)
+def _row_scale(size: np.ndarray, constant: np.ndarray) -> np.ndarray | None:
+    """Each row's factor for DAQP: 1/(its largest |coefficient|, `size`) where that is below
+    ROW_FLOOR (a row small as a whole: its units; not one that barely sees the free variables, whose
+    small coefficients are partly rounding), 1 elsewhere and on the constant rows; None if all are 1."""
     small = (size < ROW_FLOOR) & (size > 0.0) & ~constant
     if not small.any():
         return None
@@ -167,11 +164,16 @@ def outside_tolerance(value: np.ndarray, lower: np.ndarray, upper: np.ndarray) -
     return excess > FEASIBILITY_TOLERANCE * np.maximum(1.0, np.minimum(np.abs(lower), np.abs(upper)))
 
 
-def constant_rows(A: np.ndarray, A_free: np.ndarray) -> np.ndarray:
-    """The rows whose coefficients of the free variables are nothing but rounding: at most
-    CONSTANT_ROW × the row's largest coefficient (all zero in exact arithmetic, ~1e-16 relative
-    in the QP data)."""
-    return np.abs(A_free).max(axis=1, initial=0.0) <= CONSTANT_ROW * np.abs(A).max(axis=1, initial=0.0)
+def row_sizes(A: np.ndarray) -> np.ndarray:
+    """Each row's largest |coefficient|."""
+    return np.abs(A).max(axis=1, initial=0.0)
+
+
+def constant_rows(A_free: np.ndarray, row_size: np.ndarray) -> np.ndarray:
+    """The rows whose coefficients of the free variables (A_free) are nothing but rounding: at most
+    CONSTANT_ROW × the row's largest coefficient (`row_sizes` of the whole row; all zero in exact
+    arithmetic, ~1e-16 relative in the QP data)."""
+    return row_sizes(A_free) <= CONSTANT_ROW * row_size
 
 
 def daqp_qp(H: np.ndarray, f: np.ndarray, qp: FixedEliminated) -> tuple[np.ndarray | None, int, np.ndarray]:
