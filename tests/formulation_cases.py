@@ -15,8 +15,10 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
+import dcts_spec
 from dcts_spec.limits.joint import BRAKING_FLOOR, DEFAULT_BRAKING
 from dcts_spec.limits.viability import acceleration_bounds
+from dcts_spec.robot.builtin import example_robot_data_dir
 from dcts_spec.spec import Spec, load_spec_text
 from dcts_spec.spec.units import to_si
 from reference import NumericTask, closed_form_hierarchy
@@ -311,3 +313,45 @@ tasks:
   - {{name: right_pos, type: position, frame: right_gripper, priority: 2, gains: {{kp: 100, kd: 20}}, reference: {{position: [0.55, -0.55, -0.05]}}}}
   - {{name: posture, type: joint, priority: 3, gains: {{kp: 5, kd: 5}}, reference: {{q: [0.3, -0.5, 0, 1.2, 0, 0.9, 0, -0.3, -0.5, 0, 1.2, 0, 0.9, 0]}}}}
 """
+
+
+def kinova_spec(posture: bool = False) -> str:
+    """A Kinova arm (example-robot-data, 6 joints) found from outside: a position target beyond two
+    Cartesian bounds at priority 1, an orientation [rx, ry] at 2, a wrist joint at 3, and with
+    `posture` a posture at 4, which the levels above leave no direction."""
+    lowest = ("  - {name: posture, type: joint, priority: 4, gains: {kp: 2, kd: 3}, "
+              "reference: {q: [0, 2.9, 1.0, -2.0, 1.4, 1.3]}}\n") if posture else ""
+    return f"""
+version: 1
+name: kinova
+robot: {{urdf: {example_robot_data_dir() / "kinova_description" / "robots" / "kinova.urdf"}}}
+limits:
+  joint_acceleration: {{max: 30}}
+  joint_torque: {{max: [30, 60, 30, 15, 15, 15]}}
+  cartesian:
+    - {{frame: j2s6s200_end_effector, axis: z, min: 0.35}}
+    - {{frame: j2s6s200_end_effector, axis: x, max: -0.05}}
+controller: {{formulation: dcts, external_torque: measured}}
+tasks:
+  - {{name: reach, type: position, frame: j2s6s200_end_effector, priority: 1, gains: {{kp: 80, kd: 18}},
+     reference: {{position: [0.10, -0.35, 0.20]}}}}
+  - {{name: point, type: orientation, frame: j2s6s200_end_effector, axes: [rx, ry], priority: 2,
+     gains: {{kp: 60, kd: 15}}, reference: {{rpy: [180, 0, 0], unit: deg}}}}
+  - {{name: wrist, type: joint, joints: [j2s6s200_joint_6], priority: 3, gains: {{kp: 10, kd: 6}}, reference: {{q: [0.5]}}}}
+{lowest}scenario: {{duration: 1.0, initial_q: [0, 2.9, 1.0, -2.0, 1.4, 1.3]}}
+"""
+
+
+def same_step_in_c(spec_text: str, states, tmp_path, monkeypatch, status: int) -> None:
+    """The spec's C bundle at each state (q, q̇, τ_ext), both runtimes from a reset: the status
+    `status` in both, and the same scalings and torques."""
+    monkeypatch.setenv("DCTS_CACHE_DIR", str(tmp_path / "cache"))
+    spec = load_spec_text(spec_text, "spec.yaml")
+    python, compiled = dcts_spec.build_controller(spec), dcts_spec.compile_c(spec, tmp_path / "bundle")
+    for q, dq, tau_ext in states:
+        python.reset()
+        compiled.reset()
+        expected, got = python.step(q, dq, tau_ext), compiled.step(q, dq, tau_ext)
+        assert got.status == expected.status == status
+        np.testing.assert_allclose(got.scaling, expected.scaling, rtol=1e-6, atol=1e-9)
+        np.testing.assert_allclose(got.tau, expected.tau, rtol=1e-6, atol=1e-8)

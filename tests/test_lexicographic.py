@@ -34,7 +34,7 @@ from dcts_spec.robot.builtin import example_robot_data_dir
 from dcts_spec.spec import load_spec_text
 from dcts_spec.validate import validate_spec
 from formulation_cases import (BAXTER_TWO_HANDS, CAMPAIGN, HOME, TOOL, State, check_bounds, joint_acceleration_bounds,
-                               numeric_tasks, spec_text)
+                               kinova_spec, numeric_tasks, same_step_in_c, spec_text)
 from saved_qp import saved_qp
 from lexicographic_reference import (LexicographicSolution, active_set_qp, lexicographic_solution, solve_highs,
                                     task_levels)
@@ -1248,25 +1248,7 @@ def test_a_light_wrist_is_solved_as_the_reference_solves_it(name):
 
 
 
-KINOVA_SPEC = f"""
-version: 1
-name: kinova_payload
-robot: {{urdf: {example_robot_data_dir() / "kinova_description" / "robots" / "kinova.urdf"}}}
-limits:
-  joint_acceleration: {{max: 30}}
-  joint_torque: {{max: [30, 60, 30, 15, 15, 15]}}
-  cartesian:
-    - {{frame: j2s6s200_end_effector, axis: z, min: 0.35}}
-    - {{frame: j2s6s200_end_effector, axis: x, max: -0.05}}
-controller: {{formulation: dcts, external_torque: measured}}
-tasks:
-  - {{name: reach, type: position, frame: j2s6s200_end_effector, priority: 1, gains: {{kp: 80, kd: 18}},
-     reference: {{position: [0.10, -0.35, 0.20]}}}}
-  - {{name: point, type: orientation, frame: j2s6s200_end_effector, axes: [rx, ry], priority: 2,
-     gains: {{kp: 60, kd: 15}}, reference: {{rpy: [180, 0, 0], unit: deg}}}}
-  - {{name: wrist, type: joint, joints: [j2s6s200_joint_6], priority: 3, gains: {{kp: 10, kd: 6}}, reference: {{q: [0.5]}}}}
-scenario: {{duration: 1.0, initial_q: [0, 2.9, 1.0, -2.0, 1.4, 1.3]}}
-"""
+KINOVA_SPEC = kinova_spec()
 # two closed-loop states 2.5e-12 apart, from the C and the Python runtime's run of a payload
 # scenario of that spec (t = 0.538 s), after which the runs parted by 30 Nm
 KINOVA_STATES = [
@@ -1298,14 +1280,14 @@ def test_a_row_daqp_would_take_for_zero_does_not_fail_the_stages(state):
 def test_a_light_wrist_is_solved_alike_in_c(tmp_path, monkeypatch):
     """The C runtime at SO100_STATES: the same status, scalings and torques (its rows go to DAQP
     scaled as the Python runtime's, ctl_daqp)."""
-    _same_in_c(SO100_SPEC, SO100_STATES.values(), tmp_path, monkeypatch)
+    same_step_in_c(SO100_SPEC, SO100_STATES.values(), tmp_path, monkeypatch, status=0)
 
 
 @pytest.mark.skipif(not os.environ.get("DCTS_SLOW"), reason="builds a C bundle (~15 s): set DCTS_SLOW=1 to run it")
 def test_a_row_daqp_would_take_for_zero_is_constant_in_c_too(tmp_path, monkeypatch):
     """The C runtime at KINOVA_STATES: the same status, scalings and torques (ctl_daqp gives such
     rows no bounds, as FixedEliminated does)."""
-    _same_in_c(KINOVA_SPEC, KINOVA_STATES, tmp_path, monkeypatch)
+    same_step_in_c(KINOVA_SPEC, KINOVA_STATES, tmp_path, monkeypatch, status=0)
 
 
 def _solved_as_the_reference(spec_text: str, state) -> object:
@@ -1325,20 +1307,3 @@ def _solved_as_the_reference(spec_text: str, state) -> object:
         ours = level.J @ a + level.bias
         assert np.linalg.norm(ours - achieved) <= 1e-6 * max(1.0, np.linalg.norm(achieved))
     return result
-
-
-def _same_in_c(spec_text: str, states, tmp_path: Path, monkeypatch) -> None:
-    """The C runtime at each state (from a reset, as the Python runtime): the same status, scalings
-    and torques."""
-    import dcts_spec
-
-    monkeypatch.setenv("DCTS_CACHE_DIR", str(tmp_path / "cache"))
-    spec = load_spec_text(spec_text, "spec.yaml")
-    python, compiled = dcts_spec.build_controller(spec), dcts_spec.compile_c(spec, tmp_path / "bundle")
-    for q, dq, tau_ext in states:
-        python.reset()
-        compiled.reset()
-        expected, got = python.step(q, dq, tau_ext), compiled.step(q, dq, tau_ext)
-        assert got.status == expected.status == 0
-        np.testing.assert_allclose(got.scaling, expected.scaling, rtol=1e-6, atol=1e-9)
-        np.testing.assert_allclose(got.tau, expected.tau, rtol=1e-6, atol=1e-8)

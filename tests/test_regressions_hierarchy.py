@@ -37,7 +37,7 @@ from dcts_spec.formulations.qp import BOUNDS
 from dcts_spec.robot.builtin import example_robot_data_dir
 from dcts_spec.solve.lexicographic import RELAX_MARGIN
 from dcts_spec.spec import load_spec_text
-from formulation_cases import CAMPAIGN, HOME, joint_acceleration_bounds, spec_text
+from formulation_cases import CAMPAIGN, HOME, joint_acceleration_bounds, kinova_spec, same_step_in_c, spec_text
 
 ROOT = Path(__file__).resolve().parents[1]
 BENCH = ROOT / "specs" / "bench_iiwa14.yaml"
@@ -768,39 +768,12 @@ def test_a_bent_levels_scaling_is_that_of_its_least_bend():
 def test_a_bent_levels_scaling_is_the_same_in_c(tmp_path, monkeypatch):
     """The C cascade makes the same split (it stopped the bend stage a few steps in, and reported
     0.17 where Python reported 0.61 for the same motion)."""
-    monkeypatch.setenv("DCTS_CACHE_DIR", str(tmp_path / "cache"))
-    spec = load_spec_text(XARM_SPEC + XARM_POSTURE + XARM_START, "xarm.yaml")
-    python, compiled = dcts_spec.build_controller(spec), dcts_spec.compile_c(spec, tmp_path / "bundle")
-    q, dq, tau_ext = XARM_STATE
-    expected, got = python.step(q, dq, tau_ext), compiled.step(q, dq, tau_ext)
-    assert got.status == expected.status == 0
-    np.testing.assert_allclose(got.scaling, expected.scaling, rtol=1e-6, atol=1e-9)
-    np.testing.assert_allclose(got.tau, expected.tau, rtol=1e-6, atol=1e-8)
+    same_step_in_c(XARM_SPEC + XARM_POSTURE + XARM_START, [XARM_STATE], tmp_path, monkeypatch, status=0)
 
 
 # A Kinova arm (6 joints) whose posture at priority 4 gets no direction of its own (found from
 # outside: its golden test failed); the state is a relaxed golden vector of that spec
-KINOVA_SPEC = f"""
-version: 1
-name: kinova_no_freedom
-robot:
-  urdf: {example_robot_data_dir() / "kinova_description" / "robots" / "kinova.urdf"}
-limits:
-  joint_acceleration: {{max: 30}}
-  joint_torque: {{max: [30, 60, 30, 15, 15, 15]}}
-  cartesian:
-    - {{frame: j2s6s200_end_effector, axis: z, min: 0.35}}
-    - {{frame: j2s6s200_end_effector, axis: x, max: -0.05}}
-controller: {{formulation: dcts, external_torque: measured}}
-tasks:
-  - {{name: reach, type: position, frame: j2s6s200_end_effector, priority: 1, gains: {{kp: 80, kd: 18}},
-     reference: {{position: [0.10, -0.35, 0.20]}}}}
-  - {{name: point, type: orientation, frame: j2s6s200_end_effector, axes: [rx, ry], priority: 2,
-     gains: {{kp: 60, kd: 15}}, reference: {{rpy: [180, 0, 0], unit: deg}}}}
-  - {{name: wrist, type: joint, joints: [j2s6s200_joint_6], priority: 3, gains: {{kp: 10, kd: 6}}, reference: {{q: [0.5]}}}}
-  - {{name: posture, type: joint, priority: 4, gains: {{kp: 2, kd: 3}}, reference: {{q: [0, 2.9, 1.0, -2.0, 1.4, 1.3]}}}}
-scenario: {{duration: 1.0, initial_q: [0, 2.9, 1.0, -2.0, 1.4, 1.3]}}
-"""
+KINOVA_SPEC = kinova_spec(posture=True)
 KINOVA_STATE = (np.array([2.58546265, 1.67401692, 5.53213226, 2.20503362, 4.66074353, -0.11316562]),
                 np.array([-0.22015028, 0.07896124, 0.15546376, -0.03440978, -0.22501445, 0.18284952]),
                 np.array([-1.42613619, 1.24203571, -4.50028235, 0.7727392, -1.16328167, 0.21855939]))
@@ -847,13 +820,7 @@ def test_a_relaxed_step_reports_its_over_constrained_lowest_level_against_the_le
 
 @pytest.mark.skipif(not os.environ.get("DCTS_SLOW"), reason="builds a C bundle (~15 s): set DCTS_SLOW=1 to run it")
 def test_a_relaxed_steps_lowest_level_is_reported_alike_in_c(tmp_path, monkeypatch):
-    monkeypatch.setenv("DCTS_CACHE_DIR", str(tmp_path / "cache"))
-    spec = load_spec_text(KINOVA_SPEC, "kinova.yaml")
-    python, compiled = dcts_spec.build_controller(spec), dcts_spec.compile_c(spec, tmp_path / "bundle")
-    expected, got = python.step(*KINOVA_STATE), compiled.step(*KINOVA_STATE)
-    assert got.status == expected.status == 1
-    np.testing.assert_allclose(got.scaling, expected.scaling, rtol=1e-6, atol=1e-9)
-    np.testing.assert_allclose(got.tau, expected.tau, rtol=1e-6, atol=1e-8)
+    same_step_in_c(KINOVA_SPEC, [KINOVA_STATE], tmp_path, monkeypatch, status=1)
 
 NARROWED = """
 version: 1
