@@ -199,7 +199,8 @@ class Controller:
         self.reads_tau_ext = spec.controller.external_torque == "measured"
         qp = self.law.qp
         self._structure = None if qp is None else Structure(
-            qp.rows_of(BOUNDS), tuple((p.scaling, tuple(p.bend)) for p in qp.priorities), self.law.spare_variables)
+            qp.rows_of(BOUNDS), tuple((p.scaling, tuple(p.bend)) for p in qp.priorities), self.law.spare_variables,
+            tuple(self.problem.acceleration_rows.slack_weights.tolist()))
 
     # -- sizes and layout ------------------------------------------------------------------------
 

@@ -649,6 +649,7 @@ def generate_sources(
         "STATIONARY_TOLERANCE": c_double(stage_qp.STATIONARY_TOLERANCE),
         "RELAX_STEPS": ", ".join(c_double(step) for step in lexicographic.RELAX_STEPS),
         "RELAX_TRIES": len(lexicographic.RELAX_STEPS),
+        "SLACK_WEIGHTS": c_array(controller.problem.acceleration_rows.slack_weights) if nr else "0",
         "SPARE_VARIABLES": int(controller.law.spare_variables),
         "FEASIBILITY_TOLERANCE": c_double(stage_qp.FEASIBILITY_TOLERANCE),
         "MAX_EXTRAPOLATION": c_double(lexicographic.MAX_EXTRAPOLATION),

@@ -152,7 +152,7 @@ def build_problem(spec: Spec, robot: Robot) -> ControlProblem:
     period = spec.controller.period
     rows = AccelerationRows.stack(
         [
-            joint_rows(robot.limits, sym.q, sym.dq, period, robot.joint_names, params.joint, braking),
+            joint_rows(robot.limits, sym.q, sym.dq, period, robot.joint_names, params.joint, braking, robot.prismatic),
             cartesian_rows(robot.cartesian_bounds, sym, period, params.cartesian),
             collision_rows(resolve_collision(spec, robot)[0], sym, period),
         ],

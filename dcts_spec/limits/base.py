@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import casadi as ca
+import numpy as np
 
 
 @dataclass
@@ -20,6 +21,13 @@ class AccelerationRows:
     # or m/s; 0 within): after a push the acceleration bound can hold while the joint is still
     # outside its range, and a status must not call that "ok".
     excess: ca.SX  # (r)
+    # What one unit of each row's slack weighs when the torque limits cannot hold every bound
+    # (the relaxation's min Σ wᵣσᵣ): 1, but a prismatic joint's (limits/joint.py, slack_weights)
+    slack_weight: np.ndarray | None = None
+
+    @property
+    def slack_weights(self) -> np.ndarray:
+        return np.ones(len(self.names)) if self.slack_weight is None else np.asarray(self.slack_weight, dtype=float)
 
     @staticmethod
     def stack(parts: list["AccelerationRows"], n: int) -> "AccelerationRows":
@@ -33,6 +41,7 @@ class AccelerationRows:
             ca.vertcat(*[p.upper for p in parts]),
             [name for p in parts for name in p.names],
             ca.vertcat(*[p.excess for p in parts]),
+            np.concatenate([p.slack_weights for p in parts]),
         )
 
     def __len__(self) -> int:

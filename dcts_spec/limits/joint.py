@@ -74,17 +74,36 @@ def _mean_gravity(g: ca.SX, rate: ca.SX, x: ca.SX, bound: ca.SX | float, directi
     return ca.if_else(gap > _SHORT_GAP, long, g + 0.5 * rate * ca.fmax(gap, 0.0))
 
 
+def slack_weights(v_max: np.ndarray, prismatic: np.ndarray) -> np.ndarray:
+    """Per joint, what one unit of its bound's slack weighs in the relaxation (min Σ wᵣσᵣ): 1 for a
+    revolute joint (rad/s², as a Cartesian bound's m/s²), and a prismatic joint's m/s² brought to
+    the revolute joints' scale by their velocity limits, × (their median) / (its own). Unweighted,
+    a Tiago's torso lift (0.07 m/s, 2000 N) was driven down at 31 m/s² to ease its arm's
+    saturated joints under a push: 1 m/s² of the lift weighed as 1 rad/s² of a 2.7 rad/s shoulder,
+    and the lift ended 3.55 m beyond its limit (docs/formulations.md, "Bounds, their check and
+    their relaxation"). Without a velocity limit on either side, 1."""
+    v_max, prismatic = np.asarray(v_max, dtype=float), np.asarray(prismatic, dtype=bool)
+    revolute = v_max[~prismatic & np.isfinite(v_max)]
+    if not revolute.size:
+        return np.ones(v_max.size)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(prismatic & np.isfinite(v_max), np.median(revolute) / v_max, 1.0)
+
+
 def joint_rows(limits: JointLimits, q: ca.SX, dq: ca.SX, dt: float, names: list[str],
-               runtime: dict[str, list] | None = None, dynamics: BrakingDynamics | None = None) -> AccelerationRows:
+               runtime: dict[str, list] | None = None, dynamics: BrakingDynamics | None = None,
+               prismatic: np.ndarray | None = None) -> AccelerationRows:
     """One row per joint that has a finite position, velocity or acceleration bound. `runtime`
     replaces some limits (q_min, q_max, v_max, a_max: one value per joint) by run-time
     parameters; which rows and terms exist follows the compiled `limits`. The position bounds
     assume braking at the acceleration limit (DEFAULT_BRAKING without one), or, given `dynamics`
-    (limits.joint_braking "torque_limited"), at what the torque limit gives where that is less."""
+    (limits.joint_braking "torque_limited"), at what the torque limit gives where that is less.
+    `prismatic` (per joint) weighs the rows' slack (`slack_weights`; all revolute without it)."""
     n = q.shape[0]
+    weights = slack_weights(limits.v_max, np.zeros(n, dtype=bool) if prismatic is None else prismatic)
     runtime = runtime or {}
     q_min, q_max, v_max, a_max = (runtime.get(key, getattr(limits, key)) for key in ("q_min", "q_max", "v_max", "a_max"))
-    rows, lower, upper, excess, kept = [], [], [], [], []
+    rows, lower, upper, excess, kept, weight = [], [], [], [], [], []
     for j in range(n):
         bounded = [limits.q_min[j], limits.q_max[j], limits.v_max[j], limits.a_max[j]]
         if not np.isfinite(bounded).any():
@@ -101,7 +120,8 @@ def joint_rows(limits: JointLimits, q: ca.SX, dq: ca.SX, dt: float, names: list[
         upper.append(hi)
         excess.append(state_excess(q[j], dq[j], q_min[j], q_max[j], v_max[j], lo, hi, dt))
         kept.append(joint_row_name(names[j]))
+        weight.append(weights[j])
     if not kept:
         return AccelerationRows.stack([], n)
     return AccelerationRows(ca.vertcat(*rows), ca.SX.zeros(len(kept)), ca.vertcat(*lower), ca.vertcat(*upper), kept,
-                            ca.vertcat(*excess))
+                            ca.vertcat(*excess), np.array(weight))

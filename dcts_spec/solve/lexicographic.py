@@ -163,6 +163,9 @@ class Structure:
     # Some variables after the levels' own are seen by no row, up to rounding (DCTS with a run-time
     # activation: N_k z, n variables for fewer directions); see Cascade._proximal_steps
     spare_variables: bool = False
+    # what one unit of each bound row's slack weighs in the relaxation (limits/joint.py,
+    # slack_weights); None: 1 each
+    slack_weights: tuple[float, ...] | None = None
 
     @cached_property
     def _level_variables(self) -> list[np.ndarray]:
@@ -727,7 +730,8 @@ class Cascade:
 
     def relax(self) -> bool:
         """Widen the bound rows as little as the torque limits allow: one slack σᵣ ≥ 0 per bound,
-        R x + σ ≥ lo and R x − σ ≤ hi, min Σσᵣ (a linear stage, as the scaling). The sum, not the
+        R x + σ ≥ lo and R x − σ ≤ hi, min Σwᵣσᵣ (a linear stage, as the scaling; w: the
+        structure's slack weights, 1 but on a prismatic joint). The sum, not the
         sum of squares: a least-squares relaxation spreads the violation, and bounds that could
         hold gave way a little to spare the one that cannot (a joint at rest pushed 1.65 % beyond
         its bound to gain 6e-5 on another). Each bound that gave way is then widened to what was
@@ -746,7 +750,8 @@ class Cascade:
                         np.concatenate([self.ubx, np.full(r, np.inf)]), lba, uba,
                         Structure(range(0), (), self.structure.spare_variables))
         slack.nominal = np.concatenate([self.nominal, np.zeros(r)])
-        linear = np.concatenate([np.zeros(nx), np.ones(r)])
+        weights = np.ones(r) if self.structure.slack_weights is None else np.asarray(self.structure.slack_weights)
+        linear = np.concatenate([np.zeros(nx), weights])
         x = None
         for step in RELAX_STEPS:  # (see RELAX_STEPS)
             x = slack._proximal(np.zeros(nx + r), linear, step, slack.lbx, slack.ubx)
