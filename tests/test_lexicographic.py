@@ -1276,6 +1276,55 @@ def test_a_row_daqp_would_take_for_zero_does_not_fail_the_stages(state):
     assert result.scaling[1] == pytest.approx(0.11103, abs=1e-5)
 
 
+ICUB_SPEC = f"""
+version: 1
+name: icub_torso_arm
+robot:
+  urdf: {example_robot_data_dir() / "icub_description" / "robots" / "icub_reduced.urdf"}
+  locked_joints: {{l_hip_pitch: 0, l_hip_roll: 0, l_hip_yaw: 0, l_knee: 0, l_ankle_pitch: 0, l_ankle_roll: 0, r_hip_pitch: 0, r_hip_roll: 0, r_hip_yaw: 0, r_knee: 0, r_ankle_pitch: 0, r_ankle_roll: 0, l_shoulder_pitch: -0.5, l_shoulder_roll: 0.5, l_shoulder_yaw: 0, l_elbow: 0.8, l_wrist_prosup: 0, l_wrist_pitch: 0, l_wrist_yaw: 0}}
+limits:
+  joint_torque: {{max: [12, 10, 10, 6, 5, 3, 2, 0.2, 0.3, 0.3]}}
+  joint_velocity: {{max: 1.0}}
+  joint_acceleration: {{max: [6, 6, 6, 1000, 1000, 1000, 1000, 40, 1000, 1000]}}
+  cartesian:
+    - {{frame: r_hand, axis: z, min: 0.0}}
+controller: {{formulation: dcts, external_torque: measured}}
+tasks:
+  - {{name: reach, type: position, frame: r_hand, priority: 1, gains: {{kp: 40, kd: 12}}, reference: {{position: [-0.28, 0.20, -0.12]}}}}
+  - {{name: point, type: orientation, frame: r_hand, axes: [rx, ry], priority: 2, gains: {{kp: 30, kd: 10}}, reference: {{rpy: [-1.7, -0.3, 2.7]}}}}
+  - {{name: yaw_damping, type: joint, joints: [torso_yaw], priority: 3, gains: {{kp: 0, kd: 5}}}}
+  - {{name: posture, type: joint, priority: 4, gains: {{kp: 10, kd: 6}}, reference: {{q: [0.1, 0.0, 0.0, -0.6, 0.5, 0.3, 1.0, 0.0, -0.3, 0.0]}}}}
+scenario: {{duration: 1.0, initial_q: [0.1, 0.0, 0.0, -0.6, 0.5, 0.3, 1.0, 0.0, -0.3, 0.0]}}
+"""
+# found from outside (1,900 random near-bound states against the reference): the reach bent, the
+# pointing scaled to 0.141, and below them the torso's yaw damping was left bent by 4.8 rad/s²
+# (status 0, scaling 1) where the reference meets it exactly
+ICUB_STATE = ([0.45106364618691763, 0.12555521789482058, 0.069317440205038, -0.9812065602688758, 0.09727641541087217,
+               0.7395196891034288, 0.9514962175905926, 0.46628827792174454, 0.1002809095343673, 0.26274681807695766],
+              [0.48774542074688054, 0.1205610990336775, -0.24636827974044434, 0.12052404478001161, 0.12504170345403554,
+               0.11085796347728241, 0.06246792269481974, -0.06576213203764986, 0.10791681157365925, 0.15179121527046954],
+              [-0.667601975700702, 0.8807889268526105, 0.35037170026453135, -0.07636213163894173, 0.35868666418822326,
+               -0.23876462604008095, 0.08553470133507246, 0.013670143403684257, 0.007576261969052454,
+               0.0023373365126321904])
+
+
+def test_a_row_faint_in_the_free_variables_still_bounds_the_stage():
+    """At ICUB_STATE the bend stage of the yaw damping sees a 0.3 Nm wrist's torque row, at its
+    bound, through free coefficients of ~1e-7: given to DAQP without bounds (what it would take for
+    a zero row), its answer crossed the row by 5.4e-5 Nm, the check failed the stage, and the level
+    kept the bend its witness had. Now the row goes to DAQP at size 1 in the free variables
+    (stage_qp.DAQP_ZERO_TOL): every level agrees with the reference."""
+    result = _solved_as_the_reference(ICUB_SPEC, ICUB_STATE)
+    assert result.scaling[2] == 1.0
+
+
+@pytest.mark.skipif(not os.environ.get("DCTS_SLOW"), reason="builds a C bundle (~20 s): set DCTS_SLOW=1 to run it")
+def test_a_row_faint_in_the_free_variables_bounds_the_stage_in_c_too(tmp_path, monkeypatch):
+    """The C runtime at ICUB_STATE: the same status, scalings and torques (ctl_daqp scales such
+    rows as FixedEliminated does)."""
+    same_step_in_c(ICUB_SPEC, [ICUB_STATE], tmp_path, monkeypatch, status=0)
+
+
 @pytest.mark.skipif(not os.environ.get("DCTS_SLOW"), reason="builds a C bundle (~15 s): set DCTS_SLOW=1 to run it")
 def test_a_light_wrist_is_solved_alike_in_c(tmp_path, monkeypatch):
     """The C runtime at SO100_STATES: the same status, scalings and torques (its rows go to DAQP

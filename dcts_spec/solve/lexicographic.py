@@ -251,6 +251,9 @@ class Cascade:
         if x is None and (feasible or self.relaxed_point is not None):  # (see SLIVER_WIDENING)
             qp = qp.widened(SLIVER_WIDENING)
             x, _, multipliers = daqp_qp(H, f, qp)
+        if x is not None and qp.faint.size and not self._holds(x):  # (see DAQP_ZERO_TOL)
+            qp = FixedEliminated.of(self.A, lower, upper, self._layouts, faint_bounded=True)
+            x, _, multipliers = daqp_qp(H, f, qp)
         self._last_qp = None
         if x is None or not self._holds(x):
             return None

@@ -37,11 +37,19 @@ FEASIBILITY_TOLERANCE = 1e-7
 CONSTANT_ROW = 1e-10
 # DAQP's zero_tol (its default; not set): a row of its LDP whose squared norm is below it is a "zero
 # row", and DAQP calls the QP infeasible if 0 is outside the row's bounds by more than that. A row
-# of a QP's free variables that small goes to DAQP as a constant row (no bounds; the check of every
-# row on the answer decides): a Kinova's Cartesian bound, its free coefficients 1.5e-9 after a
-# bend fixed the level above (1.5e-9 of its largest: not constant by CONSTANT_ROW), its shifted
+# of a QP's free variables that small (not constant by CONSTANT_ROW) goes to DAQP without bounds, the
+# check of every row on the answer deciding; where the answer crosses such a row, the QP is solved
+# once more with those rows divided by their largest free coefficient, their bounds too (the same
+# set, which DAQP then sees: `FixedEliminated.of`'s `faint_bounded`, `Cascade._solve`). A Kinova's
+# Cartesian bound, its free coefficients 1.5e-9 after a bend fixed the level above, its shifted
 # bound 1.4e-10 from 0, made DAQP call every stage below infeasible; the bend's iterate became the
 # answer, and a level the reference scales to 0.111 got 0 (status "ok"; found from outside).
+# Without the second solve, a 10-joint iCub (2026-11-29, from outside): a 0.3 Nm wrist's torque
+# row, 1e-7 in the free variables of a bend stage below a bent and a scaled level, at its bound;
+# DAQP's answer, not seeing it, crossed it by 5.4e-5 Nm, the check failed the stage, and the level
+# was left bent by 4.8 rad/s² (status "ok", scaling 1) where the reference meets it exactly. (Given
+# its bounds in every QP, such a row moved the final QP on a 29-joint iCub's thin face 0.4 % off
+# its minimum: tests/test_lexicographic.py.)
 DAQP_ZERO_TOL = 1e-11
 # A row whose largest coefficient is below this goes to DAQP divided by it (its bounds too: the
 # same set). DAQP takes a row of its LDP whose squared norm is below its zero_tol (1e-11) for a
@@ -84,16 +92,18 @@ class FixedEliminated:
     hessian_index: tuple[np.ndarray, np.ndarray]  # H_ff = H[hessian_index]
     rows: np.ndarray  # [I; A_f]: DAQP's rows in the free variables, bounds first (`stationary`)
     row_norms: np.ndarray
+    faint: np.ndarray  # the rows of A DAQP would take for zero rows (DAQP_ZERO_TOL)
 
     @classmethod
     def of(cls, A: np.ndarray, lower: np.ndarray, upper: np.ndarray,
-           layouts: dict[bytes, tuple] | None = None) -> FixedEliminated:
+           layouts: dict[bytes, tuple] | None = None, faint_bounded: bool = False) -> FixedEliminated:
         """`lower ≤ [x; Ax] ≤ upper` (within ±DAQP_INF, `clip_to_daqp`) with the fixed variables out.
         `layouts`: what depends only on which variables are fixed, kept across calls on the same A
-        (a cascade's stages fix a few sets of variables over and over)."""
+        (a cascade's stages fix a few sets of variables over and over). `faint_bounded`: the rows
+        DAQP would take for zero rows keep their bounds, at size 1 (see DAQP_ZERO_TOL)."""
         n = A.shape[1]
         fixed = lower[:n] == upper[:n]
-        key = fixed.tobytes()
+        key = fixed.tobytes() + bytes([faint_bounded])
         layout = None if layouts is None else layouts.get(key)
         if layout is None:
             free = np.flatnonzero(~fixed)
@@ -103,13 +113,20 @@ class FixedEliminated:
             row_scale = _row_scale(row_size, constant)  # (ROW_FLOOR: A_f and its bounds times it)
             if row_scale is not None:
                 A_free = A_free * row_scale[:, None]
-            constant |= _daqp_zero_rows(A_free)
+            faint = _daqp_zero_rows(A_free) & ~constant
+            if faint.any() and faint_bounded:  # (DAQP_ZERO_TOL: to DAQP at size 1 in the free variables)
+                factor = 1.0 / np.abs(A_free[faint]).max(axis=1)
+                A_free[faint] *= factor[:, None]
+                row_scale = np.ones(A.shape[0]) if row_scale is None else row_scale
+                row_scale[faint] *= factor
+            elif faint.any():
+                constant |= faint
             rows = np.vstack((np.eye(free.size), A_free))
             layout = (free, A_free, np.ix_(free, free), np.flatnonzero(constant), rows,
-                      np.sqrt((rows * rows).sum(axis=1)), row_scale)
+                      np.sqrt((rows * rows).sum(axis=1)), row_scale, np.flatnonzero(faint))
             if layouts is not None:
                 layouts[key] = layout
-        free, A_free, index, constant, rows, row_norms, row_scale = layout
+        free, A_free, index, constant, rows, row_norms, row_scale, faint = layout
         if free.size == n:
             point = np.zeros(n)
         else:
@@ -124,7 +141,7 @@ class FixedEliminated:
             clip_to_daqp(upper[free.size:] * row_scale, upper[free.size:])
         if constant.size:  # (rows of A; in DAQP's [x_f; A_f x_f] after the free variables)
             lower[free.size + constant], upper[free.size + constant] = -DAQP_INF, DAQP_INF
-        return cls(free, point, A_free, lower, upper, index, rows, row_norms)
+        return cls(free, point, A_free, lower, upper, index, rows, row_norms, faint)
 
     def widened(self, relative: float) -> FixedEliminated:
         """The same QP with every inequality row (not the variables' bounds, nor an equality)
@@ -135,12 +152,13 @@ class FixedEliminated:
         margin = relative * np.maximum(1.0, np.minimum(np.abs(lower[inequality]), np.abs(upper[inequality])))
         lower[inequality] = np.maximum(lower[inequality] - margin, -DAQP_INF)
         upper[inequality] = np.minimum(upper[inequality] + margin, DAQP_INF)
-        return FixedEliminated(self.free, self.point, self.A, lower, upper, self.hessian_index, self.rows, self.row_norms)
+        return FixedEliminated(self.free, self.point, self.A, lower, upper, self.hessian_index, self.rows, self.row_norms,
+                               self.faint)
 
 
 def _daqp_zero_rows(A_free: np.ndarray) -> np.ndarray:
     """The rows DAQP would take for zero rows: their free coefficients' squared norm below
-    DAQP_ZERO_TOL (summed in row order, as the C sums it)."""
+    DAQP_ZERO_TOL (summed in row order, as the C sums it; a row of zeros is constant already)."""
     zero = np.zeros(A_free.shape[0], dtype=bool)
     for j in np.flatnonzero((A_free * A_free).max(axis=1, initial=0.0) < DAQP_ZERO_TOL):
         zero[j] = sum(v * v for v in A_free[j].tolist()) < DAQP_ZERO_TOL
