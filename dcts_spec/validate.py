@@ -189,6 +189,12 @@ def _check_cartesian_bounds(spec: Spec, robot: Robot, q0: np.ndarray) -> list[Di
         if not b.c_min - 1e-9 <= c <= b.c_max + 1e-9:
             diags.append(spec.source.diagnostic(("limits", "cartesian", i),
                                                 f"{b.frame}.{b.label} starts at {c:.4g} m, outside its bound {text}"))
+        if robot.fixed_to_world(b.frame):
+            diags.append(spec.source.diagnostic(
+                ("limits", "cartesian", i, "frame"), f"{b.frame} is fixed to the world: no joint moves it, so this "
+                "bound constrains nothing (it holds, or is crossed, whatever the controller does); bound a frame "
+                "the robot moves", "warning"))
+            continue
         reach = _acceleration_reach(robot, data, b)
         if reach < b.a_max:
             diags.append(spec.source.diagnostic(

@@ -488,6 +488,19 @@ def test_a_cartesian_bound_braking_beyond_what_the_joint_acceleration_limits_all
     assert not any("acceleration limits move" in m for _, m in _warnings(spec))
 
 
+def test_a_cartesian_bound_on_a_frame_fixed_to_the_world_is_a_warning(tmp_path: Path) -> None:
+    """No joint moves the base: a bound on it constrains nothing (found from outside: accepted with
+    no word, or with advice to lower its braking to 0 m/s² where joint acceleration limits exist)."""
+    spec = tmp_path / "base_bound.yaml"
+    spec.write_text("version: 1\nname: base_bound\nrobot: {model: iiwa14}\nlimits:\n  joint_acceleration: {max: 10}\n"
+                    "  cartesian:\n    - {frame: base, axis: z, min: -0.2}\n"
+                    "tasks:\n  - {name: reach, type: position, frame: tool, priority: 1, gains: {kp: 10, kd: 6}, "
+                    "reference: {position: [0.5, 0, 0.6]}}\n")
+    warned = [(line, m) for line, m in _warnings(spec) if "base" in m]
+    assert warned == [(7, "base is fixed to the world: no joint moves it, so this bound constrains nothing (it holds, "
+                          "or is crossed, whatever the controller does); bound a frame the robot moves")], _warnings(spec)
+
+
 @pytest.mark.parametrize("formulation", ["osc", "projector", "dcts"])
 def test_a_formulation_that_does_not_hold_cartesian_or_collision_limits_says_so(tmp_path: Path, formulation: str) -> None:
     """osc holds no limit and the projector the joint ones only: their steps read "ok" inside an
