@@ -315,6 +315,14 @@ tasks:
 """
 
 
+# A Tiago's torso lift and arm (example-robot-data; its head and wheels locked), as a spec's robot
+# section: two specs found from outside use it (a push, and a top level's scaling stage)
+TIAGO_ROBOT = f"""robot:
+  urdf: {example_robot_data_dir() / "tiago_description" / "robots" / "tiago_no_hand.urdf"}
+  locked_joints: {{head_1_joint: 0, head_2_joint: 0, wheel_left_joint: 0, wheel_right_joint: 0}}
+"""
+
+
 def kinova_spec(posture: bool = False) -> str:
     """A Kinova arm (example-robot-data, 6 joints) found from outside: a position target beyond two
     Cartesian bounds at priority 1, an orientation [rx, ry] at 2, a wrist joint at 3, and with

@@ -37,7 +37,8 @@ from dcts_spec.formulations.qp import BOUNDS
 from dcts_spec.robot.builtin import example_robot_data_dir
 from dcts_spec.solve.lexicographic import RELAX_MARGIN
 from dcts_spec.spec import load_spec_text
-from formulation_cases import CAMPAIGN, HOME, joint_acceleration_bounds, kinova_spec, same_step_in_c, spec_text
+from formulation_cases import (CAMPAIGN, HOME, TIAGO_ROBOT, joint_acceleration_bounds, kinova_spec, same_step_in_c,
+                               spec_text)
 
 ROOT = Path(__file__).resolve().parents[1]
 BENCH = ROOT / "specs" / "bench_iiwa14.yaml"
@@ -452,10 +453,7 @@ def test_push_300N_status_and_recovery():
 TIAGO_PUSH_SPEC = f"""
 version: 1
 name: tiago_push
-robot:
-  urdf: {example_robot_data_dir() / "tiago_description" / "robots" / "tiago_no_hand.urdf"}
-  locked_joints: {{head_1_joint: 0, head_2_joint: 0, wheel_left_joint: 0, wheel_right_joint: 0}}
-limits:
+{TIAGO_ROBOT}limits:
   joint_acceleration: {{max: 20}}
   joint_torque: {{max: [2000, 25, 25, 12, 12, 3, 5, 5]}}
   cartesian:
