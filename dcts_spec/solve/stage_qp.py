@@ -114,12 +114,12 @@ class FixedEliminated:
             if row_scale is not None:
                 A_free = A_free * row_scale[:, None]
             faint = _daqp_zero_rows(A_free) & ~constant
-            if faint.any() and faint_bounded:  # (DAQP_ZERO_TOL: to DAQP at size 1 in the free variables)
+            if faint_bounded and faint.any():  # (DAQP_ZERO_TOL: to DAQP at size 1 in the free variables)
                 factor = 1.0 / np.abs(A_free[faint]).max(axis=1)
                 A_free[faint] *= factor[:, None]
                 row_scale = np.ones(A.shape[0]) if row_scale is None else row_scale
                 row_scale[faint] *= factor
-            elif faint.any():
+            else:  # (without bounds: the check on the answer decides)
                 constant |= faint
             rows = np.vstack((np.eye(free.size), A_free))
             layout = (free, A_free, np.ix_(free, free), np.flatnonzero(constant), rows,
