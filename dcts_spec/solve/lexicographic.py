@@ -354,11 +354,14 @@ class Cascade:
     def _extrapolation(self, x, d, weights, linear, lbx, ubx) -> float:
         """The largest t ≥ 0 keeping x + t d feasible, capped at the minimum of φ along it. The
         rows x is on move along d up to rounding: they get a margin, or they would block at once
-        (the centre need not be feasible: the next proximal step projects it)."""
+        (the centre need not be feasible: the next proximal step projects it), and a row x is
+        beyond by rounding counts as on it: else its rounding, grown past the margin, blocked
+        every step (a Tiago's scaling stage crept 1e-8 a QP and ended 1.2e-6 short)."""
         slope, curvature = float((weights * x + linear) @ d), float(weights * d @ d)
         t = -slope / curvature if curvature > 0 else MAX_EXTRAPOLATION
         t = min(max(t, 0.0), MAX_EXTRAPOLATION)
         for value, rate, lo, hi in ((x, d, lbx, ubx), (self.A @ x, self.A @ d, self.lba, self.uba)):
+            value = np.minimum(np.maximum(value, lo), hi)
             margin = EXTRAPOLATION_MARGIN * np.maximum(1.0, np.minimum(np.abs(lo), np.abs(hi)))
             with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
                 up = np.where(rate > 0, (hi - value + margin) / rate, np.inf)
