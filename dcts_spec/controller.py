@@ -61,7 +61,8 @@ STATE_TOLERANCE = 1e-5
 # (codegen.flags.QP_DATA_O0_FROM is this number), slower than the looped code at -O1. Counted
 # before CSE (~5 % above the generated function's count, which the -O level reads).
 LOOPED_PRODUCTS_FROM = 150_000
-DATA_OUTPUTS = ("H", "f", "A", "lba", "uba", "lbx", "ubx", "tau0", "T", "ddq0", "Q", "s0", "S", "p0", "P", "excess")
+DATA_OUTPUTS = ("H", "f", "A", "lba", "uba", "lbx", "ubx", "tau0", "T", "ddq0", "Q", "s0", "S", "p0", "P", "excess",
+                "bound_shift")
 
 
 @dataclass
@@ -129,8 +130,9 @@ def data_function(problem: ControlProblem, law: ControlLaw, name: str = "qp_data
     if law.least_squares_task is not None:
         P, p0 = ca.mtimes(law.least_squares_task[0], D), law.least_squares_task[1]
     excess = problem.acceleration_rows.excess if qp is not None else ca.SX(0, 1)
+    bound_shift = qp.bound_shift if qp is not None else ca.SX(0, 1)
     outputs = [H, f, A, lba, uba, lbx, ubx, torque.offset, torque_matrix, ddq0, Q, law.scaling.offset, scaling_matrix, p0, P,
-               excess]
+               excess, bound_shift]
     inputs = [problem.q, problem.dq, problem.tau_ext, problem.ref, problem.param]
     return ca.Function(
         name,
@@ -313,7 +315,8 @@ class Controller:
             command = np.concatenate([data["tau0"].ravel() + data["T"] @ answer, data["ddq0"].ravel() + data["Q"] @ answer])
             return command, answer
 
-        return rounding_spread(*self._qp(data), self._structure, x, outputs, samples, enough, acceleration_map=data["Q"])
+        return rounding_spread(*self._qp(data), self._structure, x, outputs, samples, enough, acceleration_map=data["Q"],
+                               bound_shift=data["bound_shift"].ravel())
 
     def _binding(self, data: dict[str, np.ndarray], x: np.ndarray) -> bool:
         """Does a torque limit or a joint/Cartesian bound bind at x: is a row within ACTIVE_TOLERANCE
@@ -408,7 +411,8 @@ class Controller:
             x = solution
         status, relaxed, optimal = STATUS_OK, [], None
         if self.nx:
-            check = check_bounds(self._structure.bound_rows, data["A"], data["lba"].ravel(), data["uba"].ravel(), x)
+            check = check_bounds(self._structure.bound_rows, data["A"], data["lba"].ravel(), data["uba"].ravel(), x,
+                                 data["bound_shift"].ravel())
             crossed = set(check.violated) | set(np.flatnonzero(data["excess"].ravel() > STATE_TOLERANCE).tolist())
             if crossed:
                 names = self.bound_names

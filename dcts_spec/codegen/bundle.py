@@ -141,6 +141,7 @@ def qp_data_function(controller: Controller, name: str) -> ca.Function:
     outputs = [
         out["H"], out["f"], out["A"].T, ca.vertcat(out["lbx"], out["lba"]), ca.vertcat(out["ubx"], out["uba"]),
         out["tau0"], out["T"], out["ddq0"], out["Q"], out["s0"], out["S"], out["p0"], out["P"], out["excess"],
+        out["bound_shift"],
     ]
     return ca.Function(f"{name}_qp_data", inputs, outputs, ["q", "dq", "tau_ext", "ref", "param"], list(C_DATA_OUTPUTS),
                        {"cse": True})

@@ -9,7 +9,8 @@ from __future__ import annotations
 import ctypes
 
 # Outputs of the generated qp_data, in the order the wrapper points `res` at them.
-C_DATA_OUTPUTS = ("H", "f", "A_rowmajor", "bl", "bu", "tau0", "T", "ddq0", "Q", "s0", "S", "p0", "P", "excess")
+C_DATA_OUTPUTS = ("H", "f", "A_rowmajor", "bl", "bu", "tau0", "T", "ddq0", "Q", "s0", "S", "p0", "P", "excess",
+                  "bound_shift")
 
 
 def array_lengths(nx: int, na: int, nlevels: int, nref: int, nr: int, np_: int) -> dict[str, int]:
@@ -120,6 +121,7 @@ def workspace_fields(nq: int, nref: int, nx: int, na: int, nlevels: int, casadi_
         ("p0", "double", n["np"], "over-constrained lowest level: task acceleration p0 + P x"),
         ("P", "double", n["np"] * nxa, ""),
         ("excess", "double", n["nr"], "how far the state is beyond each bound's position or velocity limit"),
+        ("bound_shift", "double", n["nr"], "each bound row's constant part: its value in rad/s^2 or m/s^2 is A x plus it"),
         ("x", "double", nxa, "the solution"),
         ("x_free", "double", nxa, "the solution without torque limits and bounds (p0 + P x)"),
         ("chol", "double", n["chol"], "its Cholesky factor"),

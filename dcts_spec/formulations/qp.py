@@ -66,6 +66,9 @@ class QP:
     variables: list[str]
     levels: list[RowLevel]
     priorities: list[PriorityVariables] = field(default_factory=list)
+    # the joint/Cartesian bound rows' constant part R a₀ + offset: their value in their own units
+    # (rad/s², m/s²) is the row's A x plus it, and so are their bounds (`solve.check_bounds`)
+    bound_shift: ca.SX = field(default_factory=lambda: ca.SX(0, 1))
 
     @property
     def nx(self) -> int:
@@ -136,5 +139,5 @@ def with_limits(
     lba = ca.vertcat(-tau_max - torque.offset, rows.lower - R_c)
     uba = ca.vertcat(tau_max - torque.offset, rows.upper - R_c)
     levels = [RowLevel("torque limits", HARD, problem.n), RowLevel("joint and Cartesian bounds", BOUNDS, len(rows))]
-    qp = QP(hessian, gradient, A, lba, uba, ca.vertcat(*lbx), ca.vertcat(*ubx), variables, levels, list(priorities))
+    qp = QP(hessian, gradient, A, lba, uba, ca.vertcat(*lbx), ca.vertcat(*ubx), variables, levels, list(priorities), R_c)
     return qp, torque

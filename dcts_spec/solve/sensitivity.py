@@ -29,7 +29,8 @@ def _changed(values: np.ndarray, rng: np.random.Generator) -> np.ndarray:
 
 def rounding_spread(H, f, A, lbx, ubx, lba, uba, structure: Structure, x: np.ndarray,
                     outputs: Callable[[np.ndarray], Sequence[np.ndarray]], samples: int, enough: float,
-                    seed: int = 0, acceleration_map: np.ndarray | None = None) -> np.ndarray:
+                    seed: int = 0, acceleration_map: np.ndarray | None = None,
+                    bound_shift: np.ndarray | None = None) -> np.ndarray:
     """For each group of outputs(x) (e.g. the torques, the QP solution), the largest relative
     change (|Δ| / max(1, |value|), entry by entry) over `samples` solves of the QP with every entry
     of its data changed by ~ROUNDING relative (H symmetrically; both bounds of a variable or a row
@@ -37,8 +38,10 @@ def rounding_spread(H, f, A, lbx, ubx, lba, uba, structure: Structure, x: np.nda
     stops as soon as every group's change exceeds `enough`; a group's spread is ∞ if a solve fails.
     Groups, because a level that no free direction can move leaves its own variables undetermined
     and the torques not (a degenerate level of a 7-joint arm: x moved by 1e2, τ by 2e-8).
-    `acceleration_map`: as for `solve_lexicographic` (changed like the data)."""
+    `acceleration_map`: as for `solve_lexicographic` (changed like the data); `bound_shift`: the
+    bound rows' constant part, as for `check_bounds` (None: 0, the rows' bounds are in their units)."""
     rng = np.random.default_rng(seed)
+    shift = np.zeros(len(structure.bound_rows)) if bound_shift is None else bound_shift
     reference = [np.asarray(group, dtype=float) for group in outputs(x)]
     scales = [np.maximum(1.0, np.abs(group)) for group in reference]
     spread = np.zeros(len(reference))
@@ -51,7 +54,7 @@ def rounding_spread(H, f, A, lbx, ubx, lba, uba, structure: Structure, x: np.nda
                                       None if acceleration_map is None else _changed(acceleration_map, rng))
         if changed is None:
             return np.full(len(reference), np.inf)
-        if check_bounds(structure.bound_rows, data[2], data[5], data[6], changed).holds:
+        if check_bounds(structure.bound_rows, data[2], data[5], data[6], changed, shift).holds:
             changed, _ = to_optimum(*data, changed, structure)  # (as the step takes an "ok" answer)
         for i, (group, value, scale) in enumerate(zip(outputs(changed), reference, scales)):
             if group.size:
