@@ -86,7 +86,8 @@ class Simulation:
         log = SimulationLog.allocate(steps, n, self.initial_ref.size, levels, period, bound_names,
                                      self.param_layout.size)
         disturbances = Disturbances(sc, self.robot.model, m)
-        sensor = TorqueSensor(sc.sensing, self.controller_robot.model, steps)
+        sensor = TorqueSensor(sc.sensing, self.controller_robot.model, steps,
+                              at_start=sc.integrator != "rk4" and substeps == 1)
         follower = self.waypoints
         # Run-time parameter changes, given to the runtime at their time; `ramp` replays the ramp
         # both runtimes apply, for the log (parameter_ramp.py)
@@ -121,7 +122,7 @@ class Simulation:
                 if k:
                     np.subtract(dq[k], dq[k - 1], out=ddq[k - 1])
                     ddq[k - 1] /= period
-                sensor.measure(k, q[k - 1], dq[k - 1], ddq[k - 1], tau[k - 1], tau_meas[k])
+                sensor.measure(k, q[k - 1], dq[k - 1], q[k], dq[k], ddq[k - 1], tau[k - 1], tau_meas[k])
                 while changes and times[k] >= changes[0].time - 1e-9 * period:
                     values = layout.vector(dict(changes.pop(0).values), ramp.target)
                     self.runtime.set_params(values)
