@@ -529,6 +529,27 @@ def test_torque_always_within_limits(built, three_levels_spec):
             assert not r.ddq.any()
 
 
+@EXTENDED
+def test_a_golden_mismatch_is_an_internal_error_not_a_bad_spec(tmp_path, monkeypatch):
+    """C that does not reproduce the Python runtime is dcts's defect: `dcts compile` exits 3 (an
+    internal error), not 1 (a bad spec), and leaves no folder behind. The mismatch is forced by a
+    tolerance no difference can meet."""
+    from dcts_spec.cli import INTERNAL_ERROR, main
+    from dcts_spec.codegen import GoldenMismatch
+    from dcts_spec.codegen import bundle
+
+    monkeypatch.setattr(bundle, "_golden_tolerances",
+                        lambda formulation: {"GOLDEN_TOLERANCE": "-1", "GOLDEN_RELAXED_TOLERANCE": "-1"})
+    with pytest.raises(GoldenMismatch, match="does not reproduce the Python runtime"):
+        compile_c(MINIMAL, tmp_path / "api")
+    assert not (tmp_path / "api").exists()
+    monkeypatch.setattr(sys, "argv", ["dcts", "compile", str(MINIMAL), "-o", str(tmp_path / "cli")])
+    with pytest.raises(SystemExit) as exited:
+        main()
+    assert exited.value.code == INTERNAL_ERROR
+    assert not (tmp_path / "cli").exists()
+
+
 def test_closed_form_formulation(tmp_path):
     """A closed form (osc: no QP) builds without DAQP and matches the Python runtime."""
     out = tmp_path / "osc"

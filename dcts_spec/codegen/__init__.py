@@ -12,7 +12,7 @@ from pathlib import Path
 
 from ..robot.model import Robot
 from ..spec import Spec
-from .build import BuildReport, compile_bundle, daqp_sources
+from .build import BuildReport, GoldenMismatch, compile_bundle, daqp_sources
 from .bundle import CodegenError
 from .cache import BundleCache, default_cache_dir
 from .loader import CompiledController, load_bundle
@@ -56,5 +56,5 @@ def compiled_controller(spec: Spec | str | Path, formulation: str | None = None,
     return (cache or BundleCache()).load(spec, formulation)
 
 
-__all__ = ["BuildReport", "BundleCache", "CodegenError", "CompiledController", "compile_bundle", "compile_c",
-           "compiled_controller", "daqp_sources", "default_cache_dir", "load_bundle", "model_digest"]
+__all__ = ["BuildReport", "BundleCache", "CodegenError", "CompiledController", "GoldenMismatch", "compile_bundle",
+           "compile_c", "compiled_controller", "daqp_sources", "default_cache_dir", "load_bundle", "model_digest"]
