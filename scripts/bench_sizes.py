@@ -6,7 +6,7 @@ joint position, velocity and torque limits, and for a generated serial chain of 
 pose task at its tip: the worst case, where every task sees every joint), this writes a spec,
 runs `dcts bench --json` on it in a fresh process (so the peak memory of its child processes is that of its compiler) and
 prints a markdown table: QP-data operations, C source, the QP data's host .text, compile time and the
-compiler's peak memory, the C step's median and p99 on closed-loop states, its ratio to
+compiler's peak memory, the time of `dcts validate --check`, the C step's median and p99 on closed-loop states, its ratio to
 Pinocchio's computeAllTerms timed in the same run, and the Cortex-M7 flash (when
 arm-none-eabi-gcc is installed).
 
@@ -24,6 +24,7 @@ import os
 import subprocess
 import sys
 import tempfile
+import time
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -188,8 +189,19 @@ def bench(spec: Path, states: int, timeout: float) -> dict:
     return json.loads(done.stdout)
 
 
-def row(label: str, r: dict) -> dict:
-    """One line of the table from `dcts bench --json`."""
+def check_seconds(spec: Path) -> float:
+    """Wall time of `dcts validate SPEC --check` (every formulation built and counted) in its own
+    process, as a user waits for it (issue 16: under 30 s at 28 joints)."""
+    start = time.monotonic()
+    done = subprocess.run([sys.executable, "-c", "from dcts_spec.cli import main; main()", "validate", str(spec), "--check",
+                           "--json"], capture_output=True, text=True, cwd=ROOT)
+    if done.returncode != 0:
+        raise SystemExit(f"dcts validate --check {spec} failed:\n{done.stdout[-1500:]}{done.stderr[-1500:]}")
+    return time.monotonic() - start
+
+
+def row(label: str, r: dict, check_s: float) -> dict:
+    """One line of the table from `dcts bench --json` and the time of `validate --check`."""
     step = r["c_step"]["trajectory"]["step"]
     build = r["build"]
     firmware = r.get("cortex_m7") or {}
@@ -202,6 +214,7 @@ def row(label: str, r: dict) -> dict:
         "text_bytes": r["text_bytes"][f"{r['name']}_casadi.o"],  # the QP data: what grows
         "compile_s": build["seconds"],
         "compile_peak_rss_bytes": build["peak_rss_bytes"],
+        "validate_check_s": check_s,
         "step_median_us": step["median_us"],
         "step_p99_us": step["p99_us"],
         "ratio_to_pinocchio": r["ratio_c_step_to_pinocchio"],
@@ -213,9 +226,9 @@ def row(label: str, r: dict) -> dict:
 
 def markdown(rows: list[dict]) -> str:
     """The table as in the README."""
-    lines = ["| model | DOF | QP-data operations | C source | QP data `.text` | compile (peak RSS) | C step median / p99 "
-             "| × Pinocchio computeAllTerms (same run) | Cortex-M7 flash |",
-             "|---|---|---|---|---|---|---|---|---|"]
+    lines = ["| model | DOF | QP-data operations | C source | QP data `.text` | compile (peak RSS) | `validate --check` "
+             "| C step median / p99 | × Pinocchio computeAllTerms (same run) | Cortex-M7 flash |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         flash = "—"
         if r["cortex_m7_flash_bytes"]:
@@ -226,7 +239,7 @@ def markdown(rows: list[dict]) -> str:
             f"| {r['model']} | {r['dof']} | {r['qp_data_operations'] / 1e3:.1f} k{' looped' if r['looped_products'] else ''} "
             f"| {r['c_source_bytes'] / 1e6:.2f} MB "
             f"| {r['text_bytes'] / 1e3:.0f} kB | {r['compile_s']:.0f} s ({r['compile_peak_rss_bytes'] / 1e9:.2f} GB) "
-            f"| {r['step_median_us']:.1f} / {r['step_p99_us']:.0f} µs | {r['ratio_to_pinocchio']:.2f} | {flash} |")
+            f"| {r['validate_check_s']:.0f} s | {r['step_median_us']:.1f} / {r['step_p99_us']:.0f} µs | {r['ratio_to_pinocchio']:.2f} | {flash} |")
     return "\n".join(lines)
 
 
@@ -260,7 +273,7 @@ def main(argv: list[str] | None = None) -> int:
                 spec, label = folder / f"sizes_{key}.yaml", model.label
                 spec.write_text(model_spec(model))
             print(f"{label}: dcts bench {spec} …", file=sys.stderr, flush=True)
-            rows.append(row(label, bench(spec, args.states, args.build_timeout)))
+            rows.append(row(label, bench(spec, args.states, args.build_timeout), check_seconds(spec)))
             print(markdown(rows[-1:]).splitlines()[-1], file=sys.stderr, flush=True)
     table = markdown(rows)
     compilers = "; ".join(dict.fromkeys(r["compiler"] for r in rows))  # (the QP data's flags follow their size)

@@ -30,18 +30,17 @@ def test_check_counts_match_the_compiled_function(spec) -> None:
             "(before CSE) (" in info["summary"], info["summary"]
 
 
-@pytest.mark.skipif(not os.environ.get("DCTS_SLOW"), reason="28-joint TALOS from example-robot-data (~20 s): "
+@pytest.mark.skipif(not os.environ.get("DCTS_SLOW"), reason="28-joint TALOS from example-robot-data (~15 s): "
                     "set DCTS_SLOW=1 to run it")
-def test_check_of_28_joints_under_30_s(tmp_path) -> None:
+def test_check_of_28_joints_builds_every_formulation(tmp_path) -> None:
+    """(How long it takes is measured by scripts/bench_sizes.py, its `validate --check` column.)"""
     import sys
-    import time
 
     sys.path.insert(0, str(ROOT / "scripts"))
     from bench_sizes import MODELS, model_spec
 
     spec = tmp_path / "talos28.yaml"
     spec.write_text(model_spec(next(m for m in MODELS if m.key == "talos28")))
-    start = time.monotonic()
     checked = compile_check(validate_file(spec))
-    assert time.monotonic() - start < 30
+    assert list(checked) == list(FORMULATIONS)
     assert all(info["ok"] for info in checked.values()), checked

@@ -88,15 +88,18 @@ def _check_square(a: ca.SX, name: str) -> int:
 
 
 def _factor(a: ca.SX) -> tuple[ca.SX, list[ca.SX]]:
-    """Cholesky factor L of A and the inverses 1 / L_jj it was built with."""
+    """Cholesky factor L of A and the inverses 1 / L_jj it was built with, a column at a time (one
+    product per column: the same sums, in the same order, as an entry at a time, and a tree's
+    structural zeros stay structural)."""
     n = _check_square(a, "A")
     low = ca.SX(n, n)
     inv: list[ca.SX] = []
     for j in range(n):
-        low[j, j] = ca.sqrt(a[j, j] - ca.sumsqr(low[j, :j]))
+        row = low[j, :j]
+        low[j, j] = ca.sqrt(a[j, j] - ca.sumsqr(row))
         inv.append(1 / low[j, j])
-        for i in range(j + 1, n):
-            low[i, j] = (a[i, j] - ca.dot(low[i, :j], low[j, :j])) * inv[j]
+        if j + 1 < n:
+            low[j + 1 :, j] = (a[j + 1 :, j] - ca.mtimes(low[j + 1 :, :j], row.T)) * inv[j]
     return low, inv
 
 
@@ -105,13 +108,13 @@ def _diagonal_inverses(low: ca.SX) -> list[ca.SX]:
 
 
 def _lower_inverse(low: ca.SX, inv: list[ca.SX]) -> ca.SX:
-    """L⁻¹ (lower triangular) column by column, given inv[i] = 1 / L_ii."""
+    """L⁻¹ (lower triangular) row by row, given inv[i] = 1 / L_ii."""
     n = low.shape[0]
     out = ca.SX(n, n)
-    for j in range(n):
-        out[j, j] = inv[j]
-        for i in range(j + 1, n):
-            out[i, j] = -ca.mtimes(low[i, j:i], out[j:i, j]) * inv[i]
+    for i in range(n):
+        out[i, i] = inv[i]
+        if i:
+            out[i, :i] = -ca.mtimes(low[i, :i], out[:i, :i]) * inv[i]
     return out
 
 
@@ -147,10 +150,10 @@ def spd_inverse(a: ca.SX) -> ca.SX:
     linv = _lower_inverse(*_factor(a))
     out = ca.SX(n, n)
     for i in range(n):
-        for j in range(i + 1):
-            # (L⁻ᵀ L⁻¹)_ij = Σ_k≥i (L⁻¹)_ki (L⁻¹)_kj, since L⁻¹ is lower triangular
-            out[i, j] = ca.dot(linv[i:, i], linv[i:, j])
-            out[j, i] = out[i, j]
+        # (L⁻ᵀ L⁻¹)_ij = Σ_k≥i (L⁻¹)_ki (L⁻¹)_kj for j ≤ i, since L⁻¹ is lower triangular
+        row = ca.mtimes(linv[i:, i].T, linv[i:, : i + 1])
+        out[i, : i + 1] = row
+        out[:i, i] = row[:, :i].T
     return out
 
 
@@ -169,10 +172,9 @@ def symmetric_product(a: ca.SX, b: ca.SX) -> ca.SX:
         return call
     out = ca.SX(n, n)
     for i in range(n):
-        for j in range(i + 1):
-            out[i, j] = ca.dot(a[:, i], b[:, j])
-            if i != j:
-                out[j, i] = out[i, j]
+        row = ca.mtimes(a[:, i].T, b[:, : i + 1])  # (row i's lower part: Σₖ aₖᵢbₖⱼ, j ≤ i)
+        out[i, : i + 1] = row
+        out[:i, i] = row[:, :i].T
     return out
 
 
