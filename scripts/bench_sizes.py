@@ -179,24 +179,27 @@ def _list(values: np.ndarray) -> str:
     return "[" + ", ".join(f"{v:.6g}" for v in values) + "]"
 
 
-def bench(spec: Path, states: int, timeout: float) -> dict:
-    """`dcts bench --json` in its own process (its children's peak memory is its compiler's)."""
-    command = [sys.executable, "-c", "from dcts_spec.cli import main; main()", "bench", str(spec), "--json", "--states", str(states),
-               "--python-states", "50", "--build-timeout", str(timeout)]
-    done = subprocess.run(command, capture_output=True, text=True, cwd=ROOT)
+def _dcts(*args: str) -> str:
+    """Run `dcts ARGS` in its own process (its children's peak memory is then its compiler's);
+    its stdout, or exit with its error."""
+    done = subprocess.run([sys.executable, "-c", "from dcts_spec.cli import main; main()", *args], capture_output=True,
+                          text=True, cwd=ROOT)
     if done.returncode != 0:
-        raise SystemExit(f"dcts bench {spec} failed:\n{done.stderr[-3000:]}")
-    return json.loads(done.stdout)
+        raise SystemExit(f"dcts {' '.join(args)} failed:\n{done.stdout[-1500:]}{done.stderr[-3000:]}")
+    return done.stdout
+
+
+def bench(spec: Path, states: int, timeout: float) -> dict:
+    """`dcts bench --json` in its own process."""
+    return json.loads(_dcts("bench", str(spec), "--json", "--states", str(states), "--python-states", "50",
+                            "--build-timeout", str(timeout)))
 
 
 def check_seconds(spec: Path) -> float:
     """Wall time of `dcts validate SPEC --check` (every formulation built and counted) in its own
     process, as a user waits for it (issue 16: under 30 s at 28 joints)."""
     start = time.monotonic()
-    done = subprocess.run([sys.executable, "-c", "from dcts_spec.cli import main; main()", "validate", str(spec), "--check",
-                           "--json"], capture_output=True, text=True, cwd=ROOT)
-    if done.returncode != 0:
-        raise SystemExit(f"dcts validate --check {spec} failed:\n{done.stdout[-1500:]}{done.stderr[-1500:]}")
+    _dcts("validate", str(spec), "--check", "--json")
     return time.monotonic() - start
 
 
