@@ -14,7 +14,7 @@ chain (M is dense there) and only pays off on branched trees, where this orderin
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from contextvars import ContextVar
 
@@ -144,17 +144,23 @@ def triangular_inverse(low: ca.SX) -> ca.SX:
     return _lower_inverse(low, _diagonal_inverses(low))
 
 
+def _mirrored(n: int, lower_row: Callable[[int], ca.SX]) -> ca.SX:
+    """The symmetric n × n matrix whose row i up to its diagonal is lower_row(i) (1 × (i + 1)), its
+    upper triangle the same expressions: exactly symmetric, each entry computed once."""
+    out = ca.SX(n, n)
+    for i in range(n):
+        row = lower_row(i)
+        out[i, : i + 1] = row
+        out[:i, i] = row[:, :i].T
+    return out
+
+
 def spd_inverse(a: ca.SX) -> ca.SX:
     """A⁻¹ = L⁻ᵀ L⁻¹ of an SPD matrix, computed on the lower triangle so it is exactly symmetric."""
     n = _check_square(a, "A")
     linv = _lower_inverse(*_factor(a))
-    out = ca.SX(n, n)
-    for i in range(n):
-        # (L⁻ᵀ L⁻¹)_ij = Σ_k≥i (L⁻¹)_ki (L⁻¹)_kj for j ≤ i, since L⁻¹ is lower triangular
-        row = ca.mtimes(linv[i:, i].T, linv[i:, : i + 1])
-        out[i, : i + 1] = row
-        out[:i, i] = row[:, :i].T
-    return out
+    # (L⁻ᵀ L⁻¹)_ij = Σ_k≥i (L⁻¹)_ki (L⁻¹)_kj for j ≤ i, since L⁻¹ is lower triangular
+    return _mirrored(n, lambda i: ca.mtimes(linv[i:, i].T, linv[i:, : i + 1]))
 
 
 def symmetric_product(a: ca.SX, b: ca.SX) -> ca.SX:
@@ -170,12 +176,7 @@ def symmetric_product(a: ca.SX, b: ca.SX) -> ca.SX:
     call = _looped_call("gram", a, b)
     if call is not None:
         return call
-    out = ca.SX(n, n)
-    for i in range(n):
-        row = ca.mtimes(a[:, i].T, b[:, : i + 1])  # (row i's lower part: Σₖ aₖᵢbₖⱼ, j ≤ i)
-        out[i, : i + 1] = row
-        out[:i, i] = row[:, :i].T
-    return out
+    return _mirrored(n, lambda i: ca.mtimes(a[:, i].T, b[:, : i + 1]))  # (Σₖ aₖᵢbₖⱼ, j ≤ i)
 
 
 def null_space_basis(a: ca.SX) -> ca.SX:
