@@ -495,6 +495,85 @@ def test_a_reading_written_into_the_last_steps_array_keeps_the_last_finite_q(bui
     np.testing.assert_allclose(torques[1], expected, rtol=1e-12, atol=1e-12)
 
 
+def test_the_fallback_alone_is_the_torque_of_a_fallback_step(built, three_levels_spec):
+    """`<name>_fallback` (`CompiledController.fallback_torque`), for a supervisor that needs the
+    safe torque without a step: the torque a step with a negative status commands, from the same
+    history (a non-finite q: the last finite one's gravity); NULL arguments are refused."""
+    _, compiled = built
+    s = StateSampler(build_controller(three_levels_spec), seed=8).random()
+    q_lost = np.full(compiled.n, np.nan)
+    torques = []
+    for alone in (True, False):
+        compiled.reset()
+        assert compiled.step(s.q, s.dq, s.tau_ext, s.ref).ok
+        torques.append(compiled.fallback_torque(q_lost, s.dq) if alone else
+                       compiled.step(q_lost, s.dq, s.tau_ext, s.ref).tau)
+    assert np.abs(torques[0]).max() > 1.0 and np.array_equal(torques[0], torques[1])
+    tau = np.zeros(compiled.n)
+    assert compiled.status_name(compiled._fallback(None, s.q.ctypes.data, s.dq.ctypes.data, tau.ctypes.data)) == "bad argument"
+
+
+def _link(name: str, mass: float, com: str, inertia: str) -> str:
+    return (f'<link name="{name}"><inertial><origin xyz="{com}" rpy="0.2 -0.3 0.1"/><mass value="{mass}"/>'
+            f'<inertia {inertia}/></inertial></link>')
+
+
+def _joint(name: str, kind: str, parent: str, child: str, xyz: str, rpy: str, axis: str) -> str:
+    limit = '<limit lower="-2" upper="2" effort="40" velocity="3"/>'
+    return (f'<joint name="{name}" type="{kind}"><parent link="{parent}"/><child link="{child}"/>'
+            f'<origin xyz="{xyz}" rpy="{rpy}"/><axis xyz="{axis}"/>{limit}</joint>')
+
+
+_INERTIA = 'ixx="0.02" ixy="0.003" ixz="-0.002" iyy="0.03" iyz="0.001" izz="0.025"'
+# A tree branching at its base, with revolute and prismatic joints about and along unaligned axes
+# (Pinocchio's RevoluteUnaligned, PrismaticUnaligned), rotated placements, off-centre bodies.
+TREE_URDF = ('<?xml version="1.0"?><robot name="tree"><link name="base"/>'
+             + _link("l0", 2.0, "0.05 0.02 0.1", _INERTIA) + _link("l1", 1.5, "0.0 0.04 0.08", _INERTIA)
+             + _link("l2", 1.0, "0.1 0.0 0.02", _INERTIA) + _link("l3", 1.8, "-0.03 0.05 0.1", _INERTIA)
+             + _link("l4", 0.7, "0.02 -0.02 0.06", _INERTIA)
+             + _joint("j0", "revolute", "base", "l0", "0 0 0.1", "0.3 -0.2 0.5", "0.36 0.48 0.8")
+             + _joint("j1", "prismatic", "l0", "l1", "0.1 0 0.3", "0 0.4 0", "0.6 0 0.8")
+             + _joint("j2", "revolute", "l1", "l2", "0 0.05 0.25", "-0.3 0 0.2", "0 1 0")
+             + _joint("j3", "revolute", "base", "l3", "0.2 0 0.05", "0 0 0.7", "1 0 0")
+             + _joint("j4", "revolute", "l3", "l4", "0 0.1 0.3", "0.5 0.1 0", "0.48 0.6 0.64")
+             + "</robot>")
+
+
+def test_the_c_fallback_torque_is_pinocchios_on_a_tree_of_unaligned_joints(tmp_path):
+    """The C fallback torque runs RNEA and the CRBA's diagonal as loops over the model's tables
+    (codegen/rigid_body.py; before, CasADi's unrolled expressions of them: 11.7 of a 7-joint arm's
+    131.7 kB of Cortex-M7 flash). On a branching tree of joints about and along unaligned axes, at
+    random states fast enough that the damping and the torque limits count: equal to the law of
+    formulations/fallback.py computed from Pinocchio's own M and ν + g, and to the Python runtime's."""
+    (tmp_path / "tree.urdf").write_text(TREE_URDF)
+    spec = tmp_path / "tree.yaml"
+    spec.write_text("version: 1\nname: tree\nrobot:\n  urdf: tree.urdf\n"
+                    "limits:\n  joint_torque: {max: [40, 40, 15, 40, 6]}\ncontroller: {formulation: dcts, period: 0.002}\n"
+                    "tasks:\n  - {name: post, type: joint, priority: 1, gains: {kp: 10, kd: 6}, reference: {q: [0, 0, 0, 0, 0]}}\n")
+    controller = build_controller(spec)
+    model = controller.robot.model
+    assert {j.shortname() for j in model.joints[1:]} >= {"JointModelRevoluteUnaligned", "JointModelPrismaticUnaligned"}
+    data, rng = model.createData(), np.random.default_rng(7)
+    damping, limit = controller.problem.vector("fallback_damping"), controller.tau_max
+    scaled_back = 0
+    with compile_c(spec, tmp_path / "bundle") as compiled:
+        for _ in range(300):
+            q, dq = rng.uniform(-2, 2, 5), rng.uniform(-3, 3, 5) * rng.choice([0.01, 1.0])
+            M = pin.crba(model, data, q)
+            M = np.triu(M) + np.triu(M, 1).T
+            hold = pin.rnea(model, data, q, dq, np.zeros(5))
+            brake = M @ (-np.minimum(damping / np.diag(M), 0.5 / 0.002) * dq)
+            room = np.where(brake > 0, limit - hold, -limit - hold)
+            share = np.divide(room, brake, out=np.ones(5), where=brake != 0)
+            alpha = min(1.0, *np.where(share >= 0, share, 1.0))
+            scaled_back += alpha < 1
+            expected = np.clip(hold + alpha * brake, -limit, limit)
+            tau = compiled.fallback_torque(q, dq)
+            np.testing.assert_allclose(tau, expected, rtol=1e-9, atol=1e-9 * np.abs(expected).max())
+            np.testing.assert_allclose(tau, controller.fallback_torque(q, dq), rtol=1e-12, atol=1e-12)
+    assert 30 < scaled_back < 270  # (both the damping alone and the torque limits' share)
+
+
 @pytest.mark.parametrize("speed", [1e30, 1e154, -1e300])
 def test_an_impossible_velocity_reading_gives_the_fallback_with_gravity(built, three_levels_spec, speed):
     """A finite but impossible velocity (a sensor fault): the QP data overflow and the fallback

@@ -128,6 +128,8 @@ class CompiledController:
         self._get_params.argtypes, self._get_params.restype = [ctypes.c_void_p, ctypes.c_void_p], ctypes.c_int
         self._param_name = self._lib_fn("param_name")
         self._param_name.argtypes, self._param_name.restype = [ctypes.c_int], ctypes.c_char_p
+        self._fallback = self._lib_fn("fallback")
+        self._fallback.argtypes, self._fallback.restype = [ctypes.c_void_p] * 4, ctypes.c_int
 
     # -- same surface as Controller --------------------------------------------------------------
 
@@ -224,6 +226,16 @@ class CompiledController:
         status = self._call(q, dq, tau_ext, ref)
         return StepResult(self._tau.copy(), self._ddq_out.copy(), self._scaling_out.copy(), int(status),
                           self._solution(status), self.last_relaxed(), self.last_optimal())
+
+    def fallback_torque(self, q, dq) -> np.ndarray:
+        """The C fallback torque at (q, dq) alone (`Controller.fallback_torque`, at the parameters
+        of the last step): what a step with a negative status commands."""
+        if not self._open:
+            raise RuntimeError("the controller was closed")
+        q, dq = (np.ascontiguousarray(self._vector(v, name, self.n)) for v, name in ((q, "q"), (dq, "dq")))
+        tau = np.zeros(self.n)
+        self._fallback(self._ws, q.ctypes.data, dq.ctypes.data, tau.ctypes.data)
+        return tau
 
     def step_into(self, q, dq, tau_ext, ref, tau: np.ndarray, ddq: np.ndarray | None = None,
                   scaling: np.ndarray | None = None) -> int:

@@ -43,6 +43,40 @@ def _exact(a: np.ndarray) -> np.ndarray:
     return a
 
 
+@dataclass(frozen=True)
+class JointGeometry:
+    """The numbers of a 1-dof joint i: its parent λ(i), its placement λMi at q = 0 (R0, p0), its
+    axis in its own frame and whether it turns (else slides) about it; round-off zeros exact."""
+
+    name: str
+    parent: int
+    idx_q: int
+    idx_v: int
+    rotation: np.ndarray  # R0 (3, 3)
+    translation: np.ndarray  # p0 (3,)
+    axis: np.ndarray  # (3,)
+    revolute: bool
+
+    @classmethod
+    def of(cls, model: pin.Model, index: int) -> Self:
+        jmodel = model.joints[index]
+        kind = jmodel.shortname()
+        name = model.names[index]
+        if kind not in _SUPPORTED or jmodel.nq != 1 or jmodel.nv != 1:
+            raise ValueError(
+                f"joint {name!r} has unsupported type {kind} (nq={jmodel.nq}, nv={jmodel.nv}); "
+                f"supported are 1-dof revolute and prismatic joints: {', '.join(_SUPPORTED)}"
+            )
+        if kind in (_REVOLUTE_UNALIGNED, _PRISMATIC_UNALIGNED):
+            axis = np.asarray(jmodel.extract().axis, dtype=float)
+        else:
+            axis = np.array(_ALIGNED[kind])
+        placement = model.jointPlacements[index]
+        return cls(name, int(model.parents[index]), int(jmodel.idx_q), int(jmodel.idx_v),
+                   _exact(placement.rotation), _exact(placement.translation), _exact(axis),
+                   kind in _REVOLUTE or kind == _REVOLUTE_UNALIGNED)
+
+
 def _zeros3() -> ca.SX:
     return ca.SX.zeros(3, 1)
 
@@ -172,28 +206,16 @@ class _Joint:
     translation along the joint axis (in frame i)."""
 
     def __init__(self, model: pin.Model, index: int, q: ca.SX) -> None:
-        jmodel = model.joints[index]
-        kind = jmodel.shortname()
-        self.name: str = model.names[index]
-        if kind not in _SUPPORTED or jmodel.nq != 1 or jmodel.nv != 1:
-            raise ValueError(
-                f"joint {self.name!r} has unsupported type {kind} (nq={jmodel.nq}, nv={jmodel.nv}); "
-                f"supported are 1-dof revolute and prismatic joints: {', '.join(_SUPPORTED)}"
-            )
-        self.parent: int = int(model.parents[index])
-        self.idx_v: int = int(jmodel.idx_v)
-        self.revolute: bool = kind in _REVOLUTE or kind == _REVOLUTE_UNALIGNED
-        if kind in (_REVOLUTE_UNALIGNED, _PRISMATIC_UNALIGNED):
-            axis = np.asarray(jmodel.extract().axis, dtype=float)
-        else:
-            axis = np.array(_ALIGNED[kind])
-        axis = _exact(axis)
+        geometry = JointGeometry.of(model, index)
+        self.name: str = geometry.name
+        self.parent: int = geometry.parent
+        self.idx_v: int = geometry.idx_v
+        self.revolute: bool = geometry.revolute
+        axis = geometry.axis
         self.axis: ca.SX = ca.SX(axis)
-
-        placement = model.jointPlacements[index]
-        self.r0: ca.SX = ca.SX(_exact(placement.rotation))
-        self.p0: ca.SX = ca.SX(_exact(placement.translation))
-        qi = q[int(jmodel.idx_q)]
+        self.r0: ca.SX = ca.SX(geometry.rotation)
+        self.p0: ca.SX = ca.SX(geometry.translation)
+        qi = q[geometry.idx_q]
         if self.revolute:
             self.rj: ca.SX = _axis_rotation(axis, ca.cos(qi), ca.sin(qi))
             self.pj: ca.SX = _zeros3()
