@@ -769,17 +769,24 @@ def test_compiling_again_keeps_the_files_a_user_added_to_the_bundle(tmp_path):
     compile_bundle(MINIMAL, out, build=False)
     assert (out / "my_main.c").read_text().startswith("int main")
     assert "stale" not in (out / "minimal.h").read_text()  # dcts' own file is replaced
-    # what the bundle's `make` built since (here by hand) a built bundle replaces; a user's file
-    # inside a folder dcts wrote is refused, and nothing changes
-    (out / "build" / "other-compiler").mkdir(parents=True)
-    (out / "build" / "other-compiler" / "minimal.o").write_text("")
+    # what the bundle's `make` built since (here by hand: another compiler's configuration) a
+    # built bundle replaces; a user's file inside a folder dcts wrote is refused, and nothing changes
+    other = out / "build" / "1234567890"
+    (other / "asan").mkdir(parents=True)
+    (other / "minimal.o").write_text("")
+    (other / "asan" / "minimal_test.o").write_text("")
     (out / "libminimal.so").write_text("")
     compile_bundle(MINIMAL, out)
-    assert not (out / "build" / "other-compiler").exists() and (out / "libminimal.so").stat().st_size > 0
-    (out / "firmware" / "my_startup.c").write_text("mine")
-    with pytest.raises(CodegenError, match="firmware/my_startup.c"):
-        compile_bundle(MINIMAL, out, build=False)
-    assert (out / "firmware" / "my_startup.c").read_text() == "mine" and (out / "my_main.c").is_file()
+    assert not other.exists() and (out / "libminimal.so").stat().st_size > 0
+    # (a user's notes in build/ and a board's image in firmware/ matched the make products'
+    # patterns build/* and firmware/*.elf, and were deleted: found from outside)
+    for mine in ("firmware/my_startup.c", "firmware/my_board.elf", "build/NOTES.txt", "build/mine/keep.c"):
+        (out / mine).parent.mkdir(parents=True, exist_ok=True)
+        (out / mine).write_text("mine")
+        with pytest.raises(CodegenError, match=mine):
+            compile_bundle(MINIMAL, out, build=False)
+        assert (out / mine).read_text() == "mine" and (out / "my_main.c").is_file()
+        (out / mine).unlink()
 
 
 def test_a_bundle_compiled_again_into_its_folder_loads_the_new_code(tmp_path):

@@ -251,10 +251,16 @@ def section_size(path: Path, section: str = ".text") -> int:
 
 
 def make_products(name: str) -> tuple[str, ...]:
-    """What the bundle's Makefile builds and `make clean` removes (templates/Makefile.in): a
-    compile into the folder replaces them, whoever ran `make`."""
-    return ("build", "build/*", f"lib{name}.so", *(f"{name}_test{suffix}" for suffix in ("", "_heap", "_nomalloc", "_asan")),
-            "firmware/*.elf", "firmware/*.map", "firmware/*.size", "firmware/size.txt")
+    """What the bundle's Makefile builds and `make clean` removes (templates/Makefile.in), by name
+    (fnmatch patterns): a compile into the folder replaces them, whoever ran `make`. Any other
+    file there is a user's, and refuses the compile (a user's notes in build/ and a board's .elf
+    in firmware/ were deleted by patterns as wide as build/* and firmware/*.elf: found from outside)."""
+    configurations = ("build/[0-9]*[0-9]", "build/arm-[0-9]*[0-9]")  # build/<id>: `config_id`, cksum's digits
+    below = [f"{c}/{folder}" for c in configurations for folder in ("daqp", "heap", "nomalloc", "asan")]
+    objects = [f"{c[:-len('*[0-9]')]}*.{ext}" for c in configurations for ext in ("o", "su")]  # (* spans folders)
+    programs = [f"{name}_test{suffix}" for suffix in ("", "_heap", "_nomalloc", "_asan")]
+    firmware = [f"firmware/{name}_{stem}" for stem in ("fw.elf", "fw.map", "fw.size", "test.elf")] + ["firmware/size.txt"]
+    return ("build", "build/config", *configurations, *below, *objects, f"lib{name}.so", *programs, *firmware)
 
 
 def _golden_summary(output: str) -> str:
