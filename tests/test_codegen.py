@@ -38,6 +38,7 @@ from dcts_spec.controller import (
     STATUS_OK,
     build_controller,
 )
+from dcts_spec.robot.builtin import example_robot_data_dir
 from dcts_spec.sim.mismatch import scaled_robot
 from dcts_spec.solve import DAQP_SETTINGS
 from dcts_spec.spec import SpecError, load_spec
@@ -281,6 +282,41 @@ def test_golden_vectors_take_both_paths_of_the_step(velocity_limit, tmp_path):
     notes = golden_coverage({"golden": {"statuses": counts}, "bound_names": controller.bound_names})
     assert len(notes) == 1 and "'limits relaxed'" in notes[0]
     assert not golden_coverage({"golden": {"statuses": counts}, "bound_names": []})  # (a closed form)
+
+
+BOLT_SPEC = f"""version: 1
+name: bolt_as_shipped
+robot:
+  urdf: {example_robot_data_dir() / "bolt_description" / "robots" / "bolt.urdf"}
+tasks:
+  - {{name: left, type: position, frame: FL_FOOT, priority: 1, gains: {{kp: 100, kd: 20}}, reference: {{position: [0, 0.1235, -0.4386]}}}}
+  - {{name: right, type: position, frame: FR_FOOT, priority: 1, gains: {{kp: 100, kd: 20}}, reference: {{position: [0, -0.1235, -0.4386]}}}}
+  - {{name: posture, type: joint, priority: 2, gains: {{kp: 10, kd: 6}}, reference: {{q: [0, 0, 0, 0, 0, 0]}}}}
+"""
+
+
+def test_regular_states_of_placeholder_velocity_limits_move_at_plausible_speeds(tmp_path):
+    """Bolt's URDF as shipped (1000 rad/s on every joint): the golden vectors' regular states move
+    below the placeholder threshold, their limit states still at the limits. Drawn from the
+    placeholder, a random state at 360 rad/s had 1e5 rad/s² terms cancelling into 60 Nm, where C
+    and Python parted by their solvers' tolerance (3e-6 of a torque): `dcts compile` of a spec
+    that validates failed its golden test (found from outside)."""
+    from dcts_spec.codegen.states import golden_states
+    from dcts_spec.robot.resolve import PLACEHOLDER_SPEED
+
+    spec = tmp_path / "bolt.yaml"
+    spec.write_text(BOLT_SPEC)
+    states = golden_states(build_controller(spec))
+    speeds = {kind: max(np.abs(s.dq).max() for s in states if s.kind == kind) for kind in ("random", "fast")}
+    assert speeds["random"] <= 0.8 * PLACEHOLDER_SPEED[False] < 700 < speeds["fast"]
+
+
+@EXTENDED
+def test_bolt_as_shipped_compiles(tmp_path):
+    """The spec above compiles and passes its golden test (it failed with exit 3 before)."""
+    spec = tmp_path / "bolt.yaml"
+    spec.write_text(BOLT_SPEC)
+    assert compile_bundle(spec, tmp_path / "bundle").manifest["golden"]["statuses"]
 
 
 def test_c_agrees_with_python_on_1000_states(built, three_levels_spec):

@@ -272,6 +272,23 @@ def test_a_urdf_joint_without_its_limits_is_named(tmp_path, limit, severity, wor
         assert any(words in m for m in messages), messages
 
 
+@pytest.mark.parametrize("given", [False, True])
+def test_placeholder_velocity_limits_of_a_urdf_are_named(tmp_path, given):
+    """A URDF velocity limit of 1000 rad/s (Bolt's, Solo's) is no motor's: a warning names the joints
+    and says what takes it as it is, unless the spec gives limits.joint_velocity (found from outside:
+    Bolt's golden vectors drew random states at 360 rad/s)."""
+    path = tmp_path / "roll_arm.urdf"
+    path.write_text(URDF.replace('effort="80" velocity="2"', 'effort="80" velocity="1000"'))
+    limits = "limits:\n  joint_velocity: {max: [2, 3, 3]}\n" if given else ""
+    spec_file = tmp_path / "arm.yaml"
+    spec_file.write_text(f"version: 1\nname: arm\nrobot:\n  urdf: {path.name}\n{limits}tasks:\n"
+                         "  - {name: posture, type: joint, priority: 1, gains: {kp: 10, kd: 6}, reference: {q: [0.3, 0.2, 0.1]}}\n")
+    warned = [d.message for d in validate_spec(load_spec(spec_file)).diagnostics if "placeholders" in d.message]
+    assert warned == ([] if given else [warned[0]])
+    if not given:
+        assert "(shoulder 1000 rad/s;" in warned[0] and "limits.joint_velocity" in warned[0]
+
+
 PAYLOAD_SPEC = """version: 1
 name: carrying
 robot:

@@ -15,6 +15,8 @@ import numpy as np
 import pinocchio as pin
 
 from ..controller import STATUS_LIMITS_RELAXED, STATUS_OK, Controller
+from ..robot.model import prismatic_joints
+from ..robot.resolve import PLACEHOLDER_SPEED
 from ..tasks.cartesian import CartesianTask
 from ..tasks.joint import JointTask
 
@@ -62,6 +64,11 @@ class StateSampler:
         hi = np.where(np.isfinite(lim.q_max), lim.q_max, UNBOUNDED_RANGE)
         self.q_lo, self.q_hi = lo, hi
         self.v_max = np.where(np.isfinite(lim.v_max), lim.v_max, 2.0)
+        # the regular states' speeds: a placeholder limit (robot.resolve.PLACEHOLDER_SPEED) is no
+        # joint's speed (Bolt's 1000 rad/s gave random states at 360 rad/s, whose 1e5 rad/s² terms
+        # cancel into 60 Nm torques, where the runtimes part by their solvers' tolerance)
+        plausible = np.where(prismatic_joints(robot.model), PLACEHOLDER_SPEED[True], PLACEHOLDER_SPEED[False])
+        self.v_regular = np.minimum(self.v_max, plausible)
         self.tau_max = np.where(np.isfinite(lim.tau_max), lim.tau_max, 100.0)
         self.model = robot.model
         self.data = robot.model.createData()
@@ -74,8 +81,8 @@ class StateSampler:
         return self.rng.uniform(self.q_lo + margin * span, self.q_hi - margin * span)
 
     def random_dq(self, fraction: float = 0.25) -> np.ndarray:
-        dq = self.rng.normal(0.0, fraction * self.v_max) * self.speed
-        return np.clip(dq, -0.8 * self.v_max, 0.8 * self.v_max)
+        dq = self.rng.normal(0.0, fraction * self.v_regular) * self.speed
+        return np.clip(dq, -0.8 * self.v_regular, 0.8 * self.v_regular)
 
     def random_tau_ext(self, scale: float = 2.0) -> np.ndarray:
         if self.rng.random() < 0.4:

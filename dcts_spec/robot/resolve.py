@@ -65,6 +65,8 @@ def resolve_robot(spec: Spec) -> tuple[Robot, list[Diagnostic]]:
                 ("robot",), f"the URDF gives {', '.join(unlimited)} no {attribute} limit ({attribute}=\"0\" or none): "
                             f"driven without one; give limits.{key} to bound them", "warning"))
     names = [model.names[j] for j in range(1, model.njoints)]  # (one velocity each: revolute or prismatic)
+    if spec.limits.joint_velocity is None:
+        diags += _placeholder_velocities(src, names, urdf_limits.v_max, prismatic_joints(model))
     limits = _merge_limits(spec, urdf_limits, _JointUnits(names, prismatic_joints(model)), diags)
     bounds = _cartesian_bounds(spec, model, diags)
     if any(d.severity == "error" for d in diags):
@@ -87,6 +89,29 @@ def frame_candidates(name: str, frames: list[str], spec: Spec) -> str:
     target = spec.robot.model or str(_urdf_path(spec))
     return (f"{hint}; closest of its {len(frames)} frames: {', '.join(closest)} "
             f"(`dcts describe {target}` lists them all)")
+
+
+# A URDF velocity limit above these is a placeholder (Bolt's and Solo's 1000 rad/s, iCub's 100), not a
+# motor's: the fastest joints of legged robots turn at ~30 rad/s, and of example-robot-data's URDFs
+# none gives one between 60 (Romeo's) and 100.
+PLACEHOLDER_SPEED = {False: 90.0, True: 10.0}  # rad/s (revolute), m/s (prismatic)
+
+
+def _placeholder_velocities(src: SourceMap, names: list[str], v_max: np.ndarray, prismatic: np.ndarray) -> list[Diagnostic]:
+    """A warning naming the joints whose URDF velocity limit is a placeholder: the velocity bounds,
+    the fallback's gate on implausible readings (formulations/fallback.py) and the golden vectors'
+    limit states are drawn from it."""
+    fast = [(name, v, slides) for name, v, slides in zip(names, v_max, prismatic, strict=True)
+            if np.isfinite(v) and v > PLACEHOLDER_SPEED[slides]]
+    if not fast:
+        return []
+    shown = ", ".join(f"{name} {v:g} {'m/s' if slides else 'rad/s'}" for name, v, slides in fast[:4])
+    more = f" and {len(fast) - 4} more" if len(fast) > 4 else ""
+    return [src.diagnostic(("robot",), f"the URDF's velocity limits look like placeholders ({shown}{more}; above "
+                                       f"{PLACEHOLDER_SPEED[False]:g} rad/s or {PLACEHOLDER_SPEED[True]:g} m/s): the velocity "
+                                       f"bounds and the fallback torque's gate on implausible readings (10 × the limit) "
+                                       f"take them as they are; give limits.joint_velocity the joints' real limits",
+                                "warning")]
 
 
 def _urdf_path(spec: Spec) -> Path:
