@@ -99,12 +99,13 @@ def template(name: str) -> str:
 
 
 def render(text: str, values: dict[str, str]) -> str:
-    """Replace @KEY@ markers; every marker must be known (catches template typos)."""
+    """Replace @KEY@ markers; every marker must be known (catches template typos: a defect of dcts,
+    so a RuntimeError, exit code 3, not a CodegenError, which says the spec or the input is bad)."""
 
     def sub(match: re.Match) -> str:
         key = match.group(1)
         if key not in values:
-            raise CodegenError(f"template marker @{key}@ has no value")
+            raise RuntimeError(f"template marker @{key}@ has no value")
         return str(values[key])
 
     return re.sub(r"@([A-Za-z_][A-Za-z0-9_]*)@", sub, text)
