@@ -575,6 +575,7 @@ TREE_URDF = ('<?xml version="1.0"?><robot name="tree"><link name="base"/>'
              + "</robot>")
 
 
+@EXTENDED
 def test_the_c_fallback_torque_is_pinocchios_on_a_tree_of_unaligned_joints(tmp_path):
     """The C fallback torque runs RNEA and the CRBA's diagonal as loops over the model's tables
     (codegen/rigid_body.py; before, CasADi's unrolled expressions of them: 11.7 of a 7-joint arm's
