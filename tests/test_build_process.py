@@ -13,7 +13,7 @@ from dcts_spec.codegen import CodegenError
 from dcts_spec.codegen import process as process_module
 from dcts_spec.codegen.build import make
 from dcts_spec.codegen.bundle import DAQP_VERSION
-from dcts_spec.codegen.process import build_timeout, run
+from dcts_spec.codegen.process import build_timeout, run, start
 from dcts_spec.phases import reporting
 
 # A "compiler" that starts a child which outlives it unless its group is ended, then hangs.
@@ -103,6 +103,46 @@ def test_interrupt_ends_the_group(tmp_path: Path, monkeypatch: pytest.MonkeyPatc
     monkeypatch.undo()
     child = int((tmp_path / "child.pid").read_text())
     assert _wait_dead(child), f"the build's child {child} survived the interrupt"
+
+
+def test_a_step_given_up_on_ends_its_group(tmp_path: Path) -> None:
+    """A step started in the background (compile_bundle builds the library while it computes the
+    golden vectors) and given up on: `end` takes its whole group."""
+    (tmp_path / "Makefile").write_text(HANGING_MAKEFILE)
+    step = start(["make", "-C", str(tmp_path), "all"], tmp_path, "host build")
+    deadline = time.monotonic() + 10
+    while not (tmp_path / "child.pid").is_file() and time.monotonic() < deadline:
+        time.sleep(0.05)
+    step.end()
+    child = int((tmp_path / "child.pid").read_text())
+    assert _wait_dead(child) and step.process.poll() is not None
+
+
+def test_a_failure_while_the_library_builds_ends_its_build(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """An error in the golden vectors, computed while `make lib` runs (here a compiler that hangs):
+    the error, the compiler ended, no staging folder left."""
+    from dcts_spec.codegen import bundle as bundle_module
+    from dcts_spec.codegen.build import compile_bundle
+
+    compiler = tmp_path / "hanging-cc"
+    compiler.write_text(f'#!/bin/sh\n[ "$1" = --version ] && {{ echo hanging 1; exit 0; }}\n'
+                        f'echo $$ >> {tmp_path}/cc.pids; sleep 300\n')
+    compiler.chmod(0o755)
+
+    def failing(controller, states):
+        deadline = time.monotonic() + 10
+        while not (tmp_path / "cc.pids").is_file() and time.monotonic() < deadline:
+            time.sleep(0.05)
+        raise RuntimeError("the golden vectors failed")
+
+    monkeypatch.setenv("DCTS_CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.setattr(bundle_module, "compute_golden", failing)
+    spec = Path(__file__).resolve().parent.parent / "specs" / "minimal.yaml"
+    with pytest.raises(RuntimeError, match="the golden vectors failed"):
+        compile_bundle(spec, tmp_path / "out" / "bundle", cc=str(compiler))
+    pids = [int(line) for line in (tmp_path / "cc.pids").read_text().split()]
+    assert pids and all(_wait_dead(pid) for pid in pids), "a compiler of the library's build survived"
+    assert not (tmp_path / "out").exists()
 
 
 def test_parallel_first_downloads_of_daqp_each_get_the_complete_sources(tmp_path, monkeypatch):

@@ -373,7 +373,7 @@ def format_report(r: dict) -> str:
            else "valgrind not installed"),
     ]
     if r.get("build"):
-        lines.append(f"compile (make all): {r['build']['seconds']:.1f} s, peak memory of a build process "
+        lines.append(f"compile (make): {r['build']['seconds']:.1f} s, peak memory of a build process "
                      f"{r['build']['peak_rss_bytes'] / 1e6:.0f} MB")
     fw = r.get("cortex_m7")
     if not fw:

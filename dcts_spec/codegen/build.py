@@ -31,7 +31,7 @@ from ..spec import Spec, load_spec
 from ..spec.loader import recorded_bytes
 from .bundle import DAQP_VERSION, GENERATOR, GOLDEN_COUNT, CodegenError, generate_sources, golden_coverage
 from .model import model_record
-from .process import build_timeout as checked_timeout, run, tail
+from .process import Step, build_timeout as checked_timeout, run, start, tail
 
 CACHE_DIR = Path(os.environ.get("DCTS_CACHE", Path.home() / ".cache" / "dcts"))
 # What the golden-vector test prints (templates/test.c.in): its summary line and, built with
@@ -97,12 +97,15 @@ def daqp_sources(cache: Path | None = None, version: str = DAQP_VERSION) -> Path
     return csrc
 
 
+def _make_command(directory: Path, targets: list[str], variables: dict[str, str] | None) -> list[str]:
+    command = ["make", "-C", str(directory), f"-j{min(os.cpu_count() or 1, 8)}", *targets]
+    return command + [f"{k}={v}" for k, v in (variables or {}).items()]
+
+
 def make(directory: Path, targets: list[str], what: str, variables: dict[str, str] | None = None,
          timeout: float | None = None) -> str:
     """Run make in the bundle (`timeout`: see process.build_timeout)."""
-    command = ["make", "-C", str(directory), f"-j{min(os.cpu_count() or 1, 8)}", *targets]
-    command += [f"{k}={v}" for k, v in (variables or {}).items()]
-    return run(command, directory, what, timeout=timeout)
+    return run(_make_command(directory, targets, variables), directory, what, timeout=timeout)
 
 
 # -- output directory ------------------------------------------------------------------------------
@@ -153,9 +156,10 @@ def _remove_created(created: list[Path]) -> None:
 
 @dataclass
 class BuildCost:
-    """What compiling the host library and test (`make all`) took: its wall time, and the peak
-    resident memory of any child process of this process so far (getrusage(RUSAGE_CHILDREN);
-    in a fresh process, as `scripts/bench_sizes.py` runs it, that of the compiler)."""
+    """What compiling the host library and test (`make lib`, then `make all`) took: its wall time
+    from the library's start (the golden vectors are computed meanwhile), and the peak resident
+    memory of any child process of this process so far (getrusage(RUSAGE_CHILDREN); in a fresh
+    process, as `scripts/bench_sizes.py` runs it, that of the compiler)."""
 
     seconds: float
     peak_rss_bytes: int
@@ -189,7 +193,7 @@ class BuildReport:
                        f"no heap (`make nomalloc` passed)")
             out.append(f"  golden test    {host.get('test_summary', '')}")
             if self.cost:
-                out.append(f"  compile        {self.cost.seconds:.0f} s (make all), peak memory of a build process "
+                out.append(f"  compile        {self.cost.seconds:.0f} s (make), peak memory of a build process "
                            f"{self.cost.peak_rss_bytes / 1e6:.0f} MB")
         else:
             out.append("  sources only (--no-build): run `make && make check` in the directory")
@@ -325,19 +329,30 @@ def _keep_daqp_objects(directory: Path, build: str) -> None:
         shutil.rmtree(staging, ignore_errors=True)
 
 
-def build_host(directory: Path, manifest: dict, cc: str | None = None,
-               timeout: float | None = None) -> tuple[dict, BuildCost]:
-    """Build the host library and the test with `make`, run the test, and again linked with a
-    malloc that aborts (`make nomalloc`: neither init nor step may reach the heap). Returns the
-    manifest's `host` record and what the build took."""
-    phase("compiling C and running the golden-vector test")
+def start_library(directory: Path, cc: str | None = None, timeout: float | None = None) -> Step:
+    """Start building the host library (`make lib`: it needs no golden vector), for `build_host`
+    to finish: compile_bundle computes the golden vectors meanwhile."""
     variables = {"CC": cc} if cc else {}
-    compiler = cc or os.environ.get("CC", "cc")
     build, _ = build_dirs(directory, variables)
     _reuse_daqp_objects(directory, build)
-    start = time.monotonic()
+    phase("compiling C (and computing the golden vectors meanwhile)")
+    return start(_make_command(directory, ["lib"], variables), directory, "host build", timeout=timeout)
+
+
+def build_host(directory: Path, manifest: dict, cc: str | None = None,
+               timeout: float | None = None, library: Step | None = None) -> tuple[dict, BuildCost]:
+    """Build the host library (or finish `library`, its build started by `start_library`) and the
+    test with `make`, run the test, and again linked with a malloc that aborts (`make nomalloc`:
+    neither init nor step may reach the heap). Returns the manifest's `host` record and what the
+    build took (from the library's start)."""
+    variables = {"CC": cc} if cc else {}
+    compiler = cc or os.environ.get("CC", "cc")
+    library = library or start_library(directory, cc, timeout)
+    library.wait()
+    phase("compiling the golden-vector test and running it")
     make(directory, ["all"], "host build", variables, timeout)
-    cost = BuildCost(time.monotonic() - start, resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss * 1024)
+    build, _ = build_dirs(directory, variables)
+    cost = BuildCost(time.monotonic() - library.start, resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss * 1024)
     _keep_daqp_objects(directory, build)
     try:  # (`make all` built the test: `check` only runs it)
         test = make(directory, ["check"], "golden-vector test", variables, timeout)
@@ -551,21 +566,26 @@ def compile_bundle(
     except OSError as exc:
         _remove_created(created)
         raise CodegenError(f"cannot write into {out_dir.parent}: {exc.strerror}") from None
+    library: list[Step] = []  # (the library's build, started while the golden vectors are computed)
     try:
         source = (Path(daqp_src) if daqp_src else daqp_sources()) if controller.nx else None
         phase("generating C")
         sources = generate_sources(controller, tmp, spec_bytes=spec_bytes, golden_count=golden_count,
-                                   daqp_source=source, model=model)
+                                   daqp_source=source, model=model,
+                                   library_written=(lambda: library.append(start_library(tmp, cc, build_timeout)))
+                                   if build else None)
         manifest = sources.manifest
         report = BuildReport(out_dir, manifest, build, notes=golden_coverage(manifest))
         if build:
-            manifest["host"], report.cost = build_host(tmp, manifest, cc, build_timeout)
+            manifest["host"], report.cost = build_host(tmp, manifest, cc, build_timeout, library[0])
             manifest["built"] = True
         if target == "cortex-m7":
             report.firmware = manifest["cortex_m7"] = build_firmware(tmp, manifest, qemu=qemu, timeout=build_timeout)
         (tmp / "manifest.json").write_text(json.dumps(manifest, indent=2) + "\n")
         install(tmp, out_dir, "bundle", make_products(manifest["name"]))  # (files a user added to an older bundle stay)
     except BaseException as exc:
+        for step in library:  # (before its folder goes: a golden-vector error, Ctrl-C, SIGTERM)
+            step.end()
         shutil.rmtree(tmp, ignore_errors=True)
         _remove_created(created)
         if isinstance(exc, OSError):

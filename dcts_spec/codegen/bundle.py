@@ -15,6 +15,7 @@ import hashlib
 import json
 import re
 import shutil
+from collections.abc import Callable
 from dataclasses import dataclass
 from importlib import metadata, resources
 from pathlib import Path
@@ -531,6 +532,13 @@ def _parameter_values(controller: Controller, name: str, big: str) -> dict[str, 
     }
 
 
+def _write_files(directory: Path, files: dict[str, str]) -> None:
+    for rel, text in files.items():
+        path = directory / rel
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(text, encoding="utf-8")
+
+
 def generate_sources(
     controller: Controller,
     directory: Path,
@@ -539,11 +547,14 @@ def generate_sources(
     golden_count: int = GOLDEN_COUNT,
     daqp_source: Path | None = None,
     model: dict | None = None,
+    library_written: Callable[[], None] | None = None,
 ) -> BundleSources:
     """Write every source file of the bundle into `directory` (which must exist).
 
     `model` is the manifest's record of the robot model (`model.model_record`); by default the
-    controller's robot is taken to be the spec's own."""
+    controller's robot is taken to be the spec's own. `library_written` is called once the files
+    the library builds from are written, before the golden vectors are computed (compile_bundle
+    starts building the library there: the two take about as long at 28 joints)."""
     spec = controller.spec
     name = spec.name
     big = name.upper()
@@ -714,10 +725,6 @@ def generate_sources(
         "README.md": render(template("README.md.in"), values),
         f"{name}.map": f"/* symbols lib{name}.so exports (GNU ld version script) */\n{{\n  global: {name}_*;\n  local: *;\n}};\n",
     }
-    states = golden_states(controller, golden_count)
-    golden = compute_golden(controller, states)
-    files[f"{name}_golden.h"], files[f"{name}_golden.c"] = golden_sources(name, golden, length["nref"],
-                                                                         max(controller.param_size, 1))
     if nx:
         if daqp_source is None:
             raise CodegenError("DAQP's C sources are needed for a QP formulation (codegen.build.daqp_sources)")
@@ -727,10 +734,14 @@ def generate_sources(
                 shutil.copyfile(file, directory / "daqp" / sub / file.name)
         if (daqp_source.parent / "LICENSE").is_file():
             shutil.copyfile(daqp_source.parent / "LICENSE", directory / "daqp" / "LICENSE")
-    for rel, text in files.items():
-        path = directory / rel
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(text, encoding="utf-8")
+    _write_files(directory, files)
+    if library_written is not None:
+        library_written()
+    states = golden_states(controller, golden_count)
+    golden = compute_golden(controller, states)
+    files[f"{name}_golden.h"], files[f"{name}_golden.c"] = golden_sources(name, golden, length["nref"],
+                                                                         max(controller.param_size, 1))
+    _write_files(directory, {k: files[k] for k in (f"{name}_golden.h", f"{name}_golden.c")})
     (directory / "golden.json").write_text(json.dumps(golden_json(golden), indent=1) + "\n")
     spec_copy = copy_spec(spec, spec_bytes, directory)
 

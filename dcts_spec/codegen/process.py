@@ -73,50 +73,75 @@ def _end_group(process: subprocess.Popen) -> None:
     process.wait()
 
 
+class Step:
+    """A build step started in the background (`start`): `wait` finishes it as `run` does, `end`
+    ends its process group (a caller that gives up on it: an error, Ctrl-C, SIGTERM)."""
+
+    def __init__(self, command: list[str], cwd: Path, what: str, env: dict | None, timeout: float | None) -> None:
+        self.what, self.cwd, self.limit = what, Path(cwd), build_timeout(timeout)
+        try:
+            self.process = subprocess.Popen(command, cwd=cwd, env=env, stdout=subprocess.PIPE,
+                                            stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, text=True,
+                                            errors="replace", start_new_session=True)
+        except FileNotFoundError as exc:
+            raise CodegenError(f"{what}: {exc.filename} not found") from None
+        self.start = time.monotonic()
+        self.lines: list[str] = []
+        self.reader = threading.Thread(target=self._read, daemon=True)
+        self.reader.start()
+
+    def _read(self) -> None:
+        assert self.process.stdout is not None
+        for line in self.process.stdout:
+            self.lines.append(line)
+            started = _describe_compile(line, self.cwd)
+            if started:
+                phase(f"{self.what}: {started}")
+
+    def end(self) -> None:
+        """End the step's process group, if it still runs."""
+        if self.process.poll() is None:
+            _end_group(self.process)
+        self.reader.join(timeout=5)
+
+    def wait(self) -> str:
+        """Its output (stdout and stderr); a failure or a time-out (counted from its start) raises
+        CodegenError with the end of it."""
+        process, limit, timed_out = self.process, self.limit, False
+        try:
+            while process.poll() is None:
+                elapsed = time.monotonic() - self.start
+                if elapsed >= limit:
+                    timed_out = True
+                    break
+                try:
+                    process.wait(timeout=min(HEARTBEAT_S, limit - elapsed))
+                except subprocess.TimeoutExpired:
+                    if time.monotonic() - self.start < limit:
+                        phase(f"{self.what}: still running after {time.monotonic() - self.start:.0f} s "
+                              f"(time-out {limit:.3g} s)")
+        except BaseException:
+            _end_group(process)  # Ctrl-C, SIGTERM: the new session does not get the terminal's signal
+            raise
+        finally:
+            if timed_out:
+                _end_group(process)
+            self.reader.join(timeout=5)
+        if timed_out:
+            raise CodegenError(f"{self.what}: timed out after {limit:.3g} s; its processes were ended (allow "
+                               f"more with --build-timeout SECONDS or {TIMEOUT_VARIABLE})")
+        output = "".join(self.lines)
+        if process.returncode != 0:
+            raise CodegenError(f"{self.what} failed (exit code {process.returncode}):\n{tail(output)}")
+        return output
+
+
+def start(command: list[str], cwd: Path, what: str, env: dict | None = None, timeout: float | None = None) -> Step:
+    """Start a build step in its own process group; `Step.wait` finishes it."""
+    return Step(command, cwd, what, env, timeout)
+
+
 def run(command: list[str], cwd: Path, what: str, env: dict | None = None, timeout: float | None = None) -> str:
     """Run a build step; its output (stdout and stderr) is returned, a failure or a time-out
     (`build_timeout(timeout)`) raises CodegenError with the end of it."""
-    limit = build_timeout(timeout)
-    try:
-        process = subprocess.Popen(command, cwd=cwd, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                                   stdin=subprocess.DEVNULL, text=True, errors="replace", start_new_session=True)
-    except FileNotFoundError as exc:
-        raise CodegenError(f"{what}: {exc.filename} not found") from None
-    lines: list[str] = []
-
-    def read() -> None:
-        assert process.stdout is not None
-        for line in process.stdout:
-            lines.append(line)
-            started = _describe_compile(line, Path(cwd))
-            if started:
-                phase(f"{what}: {started}")
-
-    reader = threading.Thread(target=read, daemon=True)
-    reader.start()
-    start, timed_out = time.monotonic(), False
-    try:
-        while process.poll() is None:
-            elapsed = time.monotonic() - start
-            if elapsed >= limit:
-                timed_out = True
-                break
-            try:
-                process.wait(timeout=min(HEARTBEAT_S, limit - elapsed))
-            except subprocess.TimeoutExpired:
-                if time.monotonic() - start < limit:
-                    phase(f"{what}: still running after {time.monotonic() - start:.0f} s (time-out {limit:.3g} s)")
-    except BaseException:
-        _end_group(process)  # Ctrl-C, SIGTERM: the new session does not get the terminal's signal
-        raise
-    finally:
-        if timed_out:
-            _end_group(process)
-        reader.join(timeout=5)
-    if timed_out:
-        raise CodegenError(f"{what}: timed out after {limit:.3g} s; its processes were ended (allow more "
-                           f"with --build-timeout SECONDS or {TIMEOUT_VARIABLE})")
-    output = "".join(lines)
-    if process.returncode != 0:
-        raise CodegenError(f"{what} failed (exit code {process.returncode}):\n{tail(output)}")
-    return output
+    return start(command, cwd, what, env, timeout).wait()
