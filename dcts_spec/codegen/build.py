@@ -329,18 +329,27 @@ def _keep_daqp_objects(directory: Path, build: str) -> None:
         shutil.rmtree(staging, ignore_errors=True)
 
 
-def start_library(directory: Path, cc: str | None = None, timeout: float | None = None) -> Step:
+@dataclass
+class LibraryBuild:
+    """The host library's build, started (`start_library`): its make step and its object folder."""
+
+    step: Step
+    build: str
+
+
+def start_library(directory: Path, cc: str | None = None, timeout: float | None = None) -> LibraryBuild:
     """Start building the host library (`make lib`: it needs no golden vector), for `build_host`
     to finish: compile_bundle computes the golden vectors meanwhile."""
     variables = {"CC": cc} if cc else {}
     build, _ = build_dirs(directory, variables)
     _reuse_daqp_objects(directory, build)
     phase("compiling C (and computing the golden vectors meanwhile)")
-    return start(_make_command(directory, ["lib"], variables), directory, "host build", timeout=timeout)
+    step = start(_make_command(directory, ["lib"], variables), directory, "host build", timeout=timeout)
+    return LibraryBuild(step, build)
 
 
 def build_host(directory: Path, manifest: dict, cc: str | None = None,
-               timeout: float | None = None, library: Step | None = None) -> tuple[dict, BuildCost]:
+               timeout: float | None = None, library: LibraryBuild | None = None) -> tuple[dict, BuildCost]:
     """Build the host library (or finish `library`, its build started by `start_library`) and the
     test with `make`, run the test, and again linked with a malloc that aborts (`make nomalloc`:
     neither init nor step may reach the heap). Returns the manifest's `host` record and what the
@@ -348,11 +357,12 @@ def build_host(directory: Path, manifest: dict, cc: str | None = None,
     variables = {"CC": cc} if cc else {}
     compiler = cc or os.environ.get("CC", "cc")
     library = library or start_library(directory, cc, timeout)
-    library.wait()
+    library.step.wait()
     phase("compiling the golden-vector test and running it")
     make(directory, ["all"], "host build", variables, timeout)
-    build, _ = build_dirs(directory, variables)
-    cost = BuildCost(time.monotonic() - library.start, resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss * 1024)
+    build = library.build
+    cost = BuildCost(time.monotonic() - library.step.start,
+                     resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss * 1024)
     _keep_daqp_objects(directory, build)
     try:  # (`make all` built the test: `check` only runs it)
         test = make(directory, ["check"], "golden-vector test", variables, timeout)
@@ -566,7 +576,7 @@ def compile_bundle(
     except OSError as exc:
         _remove_created(created)
         raise CodegenError(f"cannot write into {out_dir.parent}: {exc.strerror}") from None
-    library: list[Step] = []  # (the library's build, started while the golden vectors are computed)
+    library: list[LibraryBuild] = []  # (the library's build, started while the golden vectors are computed)
     try:
         source = (Path(daqp_src) if daqp_src else daqp_sources()) if controller.nx else None
         phase("generating C")
@@ -584,8 +594,8 @@ def compile_bundle(
         (tmp / "manifest.json").write_text(json.dumps(manifest, indent=2) + "\n")
         install(tmp, out_dir, "bundle", make_products(manifest["name"]))  # (files a user added to an older bundle stay)
     except BaseException as exc:
-        for step in library:  # (before its folder goes: a golden-vector error, Ctrl-C, SIGTERM)
-            step.end()
+        for started in library:  # (before its folder goes: a golden-vector error, Ctrl-C, SIGTERM)
+            started.step.end()
         shutil.rmtree(tmp, ignore_errors=True)
         _remove_created(created)
         if isinstance(exc, OSError):
