@@ -38,7 +38,7 @@ from .datasheet import (conventions_text, fmt_list, gains_text, limits_text, mod
                         parameters_struct, parameters_text, ref_layout_text, sizes_text, status_text, timing_text)
 from .flags import (C_WARNINGS, DAQP_OPTIMIZATION, FIRMWARE_CONTROLLER_OPTIMIZATION, HOST_OPTIMIZATION,
                     MAX_QP_DATA_OPERATIONS, QP_DATA_O0_FROM, QP_DATA_O1_FROM, flags_text, qp_data_optimization)
-from .c_literals import c_array, c_double
+from .c_literals import c_array, c_double, c_rows
 from .model import model_record
 from .rigid_body import rigid_body_values
 from .spec_copy import copy_spec
@@ -381,7 +381,7 @@ def golden_sources(name: str, golden: Golden, nref_alloc: int, nparam_alloc: int
     count = len(golden.states)
 
     def table(rows) -> str:
-        return ",\n".join("    {" + c_array(r) + "}" for r in rows)
+        return "    " + c_rows(rows, ",\n    ")
 
     refs = [s.ref if s.ref.size else np.zeros(nref_alloc) for s in golden.states]
     params = [s.params if s.params is not None and s.params.size else np.zeros(nparam_alloc) for s in golden.states]

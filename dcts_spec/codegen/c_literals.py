@@ -17,3 +17,8 @@ def c_double(value: float) -> str:
 
 def c_array(values) -> str:
     return ", ".join(c_double(v) for v in np.asarray(values, dtype=float).ravel())
+
+
+def c_rows(rows, separator: str = ", ") -> str:
+    """The initializers of a 2-D C array, one braced row per entry of `rows`."""
+    return separator.join("{" + c_array(row) + "}" for row in rows)

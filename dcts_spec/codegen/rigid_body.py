@@ -16,7 +16,7 @@ import numpy as np
 import pinocchio as pin
 
 from ..symbolic.dynamics import JointGeometry
-from .c_literals import c_array
+from .c_literals import c_array, c_rows
 
 
 def rigid_body_values(model: pin.Model) -> dict[str, str]:
@@ -28,18 +28,14 @@ def rigid_body_values(model: pin.Model) -> dict[str, str]:
     if np.any(np.asarray(model.gravity.angular) != 0.0):
         raise ValueError("the model's gravity has an angular part")
     bodies = [model.inertias[i] for i in range(1, model.njoints)]
-
-    def rows(values) -> str:
-        return ", ".join("{" + c_array(np.ravel(v)) + "}" for v in values)
-
     return {
         "RB_PARENT": ", ".join(str(joint.parent - 1) for joint in joints),
-        "RB_ROTATION": rows(joint.rotation for joint in joints),
-        "RB_TRANSLATION": rows(joint.translation for joint in joints),
-        "RB_AXIS": rows(joint.axis for joint in joints),
+        "RB_ROTATION": c_rows(joint.rotation for joint in joints),
+        "RB_TRANSLATION": c_rows(joint.translation for joint in joints),
+        "RB_AXIS": c_rows(joint.axis for joint in joints),
         "RB_REVOLUTE": ", ".join(str(int(joint.revolute)) for joint in joints),
         "RB_MASS": c_array(np.array([float(body.mass) for body in bodies])),
-        "RB_COM": rows(np.asarray(body.lever) for body in bodies),
-        "RB_INERTIA": rows(np.asarray(body.inertia) for body in bodies),
+        "RB_COM": c_rows(np.asarray(body.lever) for body in bodies),
+        "RB_INERTIA": c_rows(np.asarray(body.inertia) for body in bodies),
         "RB_GRAVITY": c_array(np.asarray(model.gravity.linear, dtype=float)),
     }
