@@ -26,6 +26,7 @@ from .formulations.qp import BOUNDS
 from .parameter_ramp import ParameterRamp, ramp_steps
 from .robot.model import Robot
 from .solve import Hint, Structure, check_bounds, rounding_spread, solve_hinted, to_optimum, unbounded_solution
+from .solve.stage_qp import FEASIBILITY_TOLERANCE
 from .spec import Spec, SpecError, load_spec
 from .symbolic.linalg import looped_products
 from .tasks import ReferenceInput
@@ -49,7 +50,12 @@ STATUS_NAMES = {
     STATUS_SOLVER_FAILED: "solver failed",
     STATUS_INVALID_OUTPUT: "invalid output",
 }
-TORQUE_TOLERANCE = 1e-5  # relative to max(1, τ_max): what solver tolerances may leave (then clipped)
+# What solver tolerances may leave of a torque limit (the torque is then clipped): relative to
+# max(1, τ_max), plus what the cascade held the torque rows to, FEASIBILITY_TOLERANCE relative to
+# their bounds ±τ_max − τ₀ (`Cascade._holds`). The second term counts only where τ₀ ≫ τ_max: an
+# Alex at 78–91 rad/s on its 100 rad/s placeholder limits had τ₀ = 4.2e4 Nm against 300, and its
+# answer, 7.6e-8 of τ₀ beyond a limit (3.2e-3 Nm), fell back as "invalid output" in both runtimes.
+TORQUE_TOLERANCE = 1e-5
 # A row is active (binding) at the solution when it is this close to its bound, relative to
 # max(1, |bound|): then an over-constrained lowest level's scaling needs the solve without bounds.
 ACTIVE_TOLERANCE = 1e-9
@@ -423,7 +429,8 @@ class Controller:
                 x, optimal = to_optimum(*self._qp(data), x, self._structure)
         tau = data["tau0"].ravel() + data["T"] @ x
         tau_max = self.torque_limit(param)
-        tolerance = TORQUE_TOLERANCE * np.maximum(1.0, np.where(np.isfinite(tau_max), tau_max, 1.0))
+        tolerance = (TORQUE_TOLERANCE * np.maximum(1.0, np.where(np.isfinite(tau_max), tau_max, 1.0))
+                     + FEASIBILITY_TOLERANCE * np.abs(data["tau0"].ravel()))
         out_of_limits = self.law.enforces_torque_limits and (np.abs(tau) > tau_max + tolerance).any()
         if not np.isfinite(tau).all() or out_of_limits:
             return self._fallback(q, dq, STATUS_INVALID_OUTPUT, x)
