@@ -62,7 +62,8 @@ def test_simulate_announces_each_phase_and_quiet_silences_them(tmp_path: Path) -
     assert "simulating short: dcts (python): 0.03 s in 30 control steps" in said[1]
     assert "and plots" in said[2]
     assert "wrote " in result.stdout
-    quiet = invoke("simulate", str(spec), "--runtime", "python", "-o", str(tmp_path / "run"), "-q")
+    # (without plots: writing them again took half of this test)
+    quiet = invoke("simulate", str(spec), "--runtime", "python", "-o", str(tmp_path / "run"), "-q", "--no-plots")
     assert quiet.exit_code == 0 and quiet.output == ""
 
 

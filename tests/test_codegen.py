@@ -1301,8 +1301,9 @@ def test_valgrind_memcheck(built, tmp_path):
     assert "ERROR SUMMARY: 0 errors" in done.stderr and "definitely lost" not in done.stderr
 
 
-@pytest.mark.slow
-@pytest.mark.parametrize("formulation", ["dcts", "osc", pytest.param("projector", marks=EXTENDED), "qp_mt", "qp_md"])
+# (OSC's bundle is also built and compared with the Python runtime by test_closed_form_formulation)
+@pytest.mark.parametrize("formulation", ["dcts", pytest.param("osc", marks=pytest.mark.slow),
+                                         pytest.param("projector", marks=EXTENDED), "qp_mt", "qp_md"])
 def test_every_formulation_builds_and_replays(three_levels_spec, tmp_path, formulation):
     report = compile_bundle(three_levels_spec, tmp_path / formulation, formulation=formulation)  # runs the replay
     assert report.manifest["built"] and "golden vectors" in report.manifest["host"]["test_summary"]

@@ -27,7 +27,7 @@ scenario: {duration: 1.0, initial_q: [0, 30, 0, -60, 0, 60, 0], unit: deg}
 """
 
 
-@pytest.mark.slow
+@pytest.mark.slow  # (the default tier generates its sources below; its rows are QP data like every bound's)
 def test_a_spec_with_collisions_compiles_and_passes_its_golden_check(tmp_path: Path) -> None:
     spec = tmp_path / "collision.yaml"
     spec.write_text(SPEC)

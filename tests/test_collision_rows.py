@@ -122,7 +122,7 @@ scenario: {duration: 1.0, initial_q: [0, 30, 0, -60, 0, 60, 0], unit: deg}
 """
 
 
-@pytest.mark.parametrize("formulation", ["dcts", "osc"])
+@pytest.mark.parametrize("formulation", ["dcts", pytest.param("osc", marks=pytest.mark.slow)])
 def test_a_task_pulling_the_tool_through_a_ball_stops_at_the_minimum_distance(formulation, tmp_path) -> None:
     """The target is beyond the ball: dcts stops the wrist at 2 cm with status ok; OSC, which
     keeps no bound, runs into it (the ball is a MuJoCo contact: it cannot go through, but comes

@@ -132,6 +132,7 @@ def test_exp1_null_space_energy(in_tmp):
     assert not verdicts["exp1.qp_mt_without_gravity_null_space_grows"]
 
 
+@pytest.mark.slow  # (scripts/reproduce_paper.py checks the same claims)
 def test_exp2_push(in_tmp):
     """Under the push OSC and DCTS inject less kinetic energy and move along Λ⁻¹f."""
     result = _analysis("exp2")

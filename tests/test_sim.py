@@ -494,7 +494,7 @@ def run_c_like_python(text: str, **c_options) -> tuple[Simulation, object]:
     return c, c_log
 
 
-@pytest.mark.slow
+@pytest.mark.slow  # (the default tier: test_c_runtime_simulates_model_mismatch_like_python)
 def test_c_runtime_runs_the_same_closed_loop_as_python(tmp_path: Path) -> None:
     run_c_like_python(spec_text(PUSH), work_dir=tmp_path, cache=False)
 

@@ -301,6 +301,7 @@ def test_ray_gives_the_serial_loops_numbers(ray_session, spec_file, campaign_fil
     assert "plots/initial_state.offset.norm.png" in result.report["plots"]  # a per-joint value: by its norm
 
 
+@pytest.mark.slow  # (Ray's own session: test_ray_gives_the_serial_loops_numbers)
 def test_a_cluster_address_runs_the_campaign_there(ray_session, spec_file, campaign_file, serial_run,
                                                    tmp_path) -> None:
     """`--address`: another process (here the module's Ray session stands for a cluster) runs the
@@ -319,6 +320,7 @@ def test_a_cluster_address_runs_the_campaign_there(ray_session, spec_file, campa
     assert all(_without_timing(rows[i]) == _without_timing(reference[i]) for i in rows)
 
 
+@pytest.mark.slow
 def test_a_dead_worker_is_replaced_and_its_samples_run_again(ray_session, spec_file, campaign_file,
                                                              serial_run) -> None:
     session = CampaignSession(spec_file, campaign_file, serial_run.folder, {"mode": "sweep"},
