@@ -11,6 +11,7 @@ import json
 import os
 import signal
 import sys
+import traceback
 from collections.abc import Iterator
 from contextlib import contextmanager
 from functools import partial
@@ -503,8 +504,9 @@ def main() -> None:
         if _interrupted(error):
             sys.exit(128 + signal.SIGINT)
         if os.environ.get("DCTS_DEBUG"):
-            raise
-        typer.echo(f"error: {type(error).__name__}: {error} (set DCTS_DEBUG=1 to see the traceback)", err=True)
+            traceback.print_exc()  # (and still exit 3: re-raised, the interpreter exited 1, "bad spec")
+        else:
+            typer.echo(f"error: {type(error).__name__}: {error} (set DCTS_DEBUG=1 to see the traceback)", err=True)
         sys.exit(INTERNAL_ERROR)
     finally:
         if (signum := stop_signal()) is not None:  # even if the handler's SystemExit was lost

@@ -111,16 +111,23 @@ def test_bad_specs_exit_1(command: str, tmp_path: Path) -> None:
     assert not (tmp_path / "out").exists()
 
 
-def test_an_internal_error_exits_3_not_2(monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture) -> None:
+@pytest.mark.parametrize("debug", [False, True])
+def test_an_internal_error_exits_3_not_2(monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture,
+                                         debug: bool) -> None:
+    """Exit 3 with DCTS_DEBUG too (it exited 1, "bad spec", with the traceback: found from outside)."""
     def broken_app() -> None:
         raise RuntimeError("a bug")
 
     monkeypatch.setattr(cli, "app", broken_app)
-    monkeypatch.delenv("DCTS_DEBUG", raising=False)
+    if debug:
+        monkeypatch.setenv("DCTS_DEBUG", "1")
+    else:
+        monkeypatch.delenv("DCTS_DEBUG", raising=False)
     with pytest.raises(SystemExit) as exited:
         cli.main()
     assert exited.value.code == 3
-    assert "RuntimeError: a bug" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "RuntimeError: a bug" in err and ("Traceback" in err) == debug
 
 
 def test_ctrl_c_inside_casadi_exits_130(monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture) -> None:
