@@ -25,7 +25,8 @@ from .formulations.parameters import ParameterLayout
 from .formulations.qp import BOUNDS
 from .parameter_ramp import ParameterRamp, ramp_steps
 from .robot.model import Robot
-from .solve import Hint, Structure, check_bounds, rounding_spread, solve_hinted, to_optimum, unbounded_solution
+from .solve import (Hint, Structure, check_bounds, marginal_rows, rounding_spread, solve_hinted, to_optimum,
+                    unbounded_solution)
 from .solve.stage_qp import FEASIBILITY_TOLERANCE
 from .spec import Spec, SpecError, load_spec
 from .symbolic.linalg import looped_products
@@ -323,6 +324,23 @@ class Controller:
 
         return rounding_spread(*self._qp(data), self._structure, x, outputs, samples, enough, acceleration_map=data["Q"],
                                bound_shift=data["bound_shift"].ravel())
+
+    def status_determined(self, q, dq, tau_ext, ref, x: np.ndarray) -> bool:
+        """Is the last step's status ("ok" or "limits relaxed", its answer x at this state) one that
+        any answer the cascade accepts here would get? Not where the bound check of a row it turns
+        on is within rounding of its tolerance (`solve.marginal_rows`): then another runtime's
+        answer, as good, may get the other status. A state beyond a limit decides it by itself."""
+        if not self.nx:
+            return True
+        data = self.evaluate_data(q, dq, tau_ext, ref)
+        if (data["excess"].ravel() > STATE_TOLERANCE).any():
+            return True
+        rows, A, lba, uba, shift = (self._structure.bound_rows, data["A"], data["lba"].ravel(), data["uba"].ravel(),
+                                    data["bound_shift"].ravel())
+        marginal = marginal_rows(rows, A, lba, uba, x, shift)
+        crossed = np.zeros(marginal.size, dtype=bool)
+        crossed[check_bounds(rows, A, lba, uba, x, shift).violated] = True
+        return not marginal[crossed].all() if crossed.any() else not marginal.any()
 
     def _binding(self, data: dict[str, np.ndarray], x: np.ndarray) -> bool:
         """Does a torque limit or a joint/Cartesian bound bind at x: is a row within ACTIVE_TOLERANCE

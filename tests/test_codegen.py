@@ -255,6 +255,15 @@ def test_golden_test_fails_on_mismatch(built, tmp_path):
     assert done.returncode != 0 and f"mismatch: vector {k} x[0]" in done.stdout, done.stdout
     done = check(_with_entry(wrong_x, "three_levels_golden_compared", k, "1"))
     assert done.returncode == 0, done.stdout
+    # a status rounding decides (golden.json, status_determined): "ok" and "limits relaxed" both pass
+    wrong_status = _with_entry(pristine, "three_levels_golden_status", k, "1")
+    done = check(wrong_status)
+    assert done.returncode != 0 and f"mismatch: vector {k} status" in done.stdout, done.stdout
+    done = check(_with_entry(wrong_status, "three_levels_golden_status_determined", k, "0"))
+    assert done.returncode == 0 and "1 with the other of ok and relaxed" in done.stdout, done.stdout
+    done = check(_with_entry(_with_entry(pristine, "three_levels_golden_status", k, "-2"),
+                             "three_levels_golden_status_determined", k, "0"))
+    assert done.returncode != 0 and f"mismatch: vector {k} status" in done.stdout, done.stdout
 
 
 @pytest.mark.parametrize("velocity_limit", [None, 100.0])

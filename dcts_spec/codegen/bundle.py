@@ -328,6 +328,10 @@ class Golden:
     # limits only), each part where its spread is within SPREAD_FRACTION of the tolerance
     spread: np.ndarray
     compared: np.ndarray
+    # per vector: False where rounding could give the other of "ok" and "limits relaxed"
+    # (Controller.status_determined); the test then accepts either, and compares the rest only
+    # where the status is the same
+    status_determined: np.ndarray
 
     @property
     def determined(self) -> np.ndarray:
@@ -356,6 +360,7 @@ def compute_golden(controller: Controller, states: list[State]) -> Golden:
     scaling, x = np.zeros((count, levels)), np.zeros((count, max(nx, 1)))
     nxs, status = np.zeros(count, dtype=int), np.zeros(count, dtype=int)
     spread, limit = np.zeros((count, 2)), np.zeros(count)  # limit: the spread a determined answer may have
+    status_determined = np.ones(count, dtype=bool)
     tolerances = golden_tolerances(controller.formulation)
     for k, s in enumerate(states):
         if s.params is not None:
@@ -368,11 +373,12 @@ def compute_golden(controller: Controller, states: list[State]) -> Golden:
         if r.status >= 0:
             limit[k] = SPREAD_FRACTION * tolerances[r.status == STATUS_LIMITS_RELAXED]
             spread[k] = controller.answer_spread(s.q, s.dq, s.tau_ext, ref, r.x, SPREAD_SAMPLES, limit[k])
+            status_determined[k] = controller.status_determined(s.q, s.dq, s.tau_ext, ref, r.x)
     controller.reset()
     controller.reset_params()
     command, solution = (spread[:, i] <= limit for i in (0, 1))
     compared = np.where(command & solution, COMPARED_ALL, np.where(command, COMPARED_COMMAND, COMPARED_STATUS))
-    return Golden(states, tau, ddq, scaling, x, nxs, status, spread, compared)
+    return Golden(states, tau, ddq, scaling, x, nxs, status, spread, compared, status_determined)
 
 
 def golden_sources(name: str, golden: Golden, nref_alloc: int, nparam_alloc: int) -> tuple[str, str]:
@@ -408,6 +414,9 @@ extern const int {name}_golden_status[{count}];
 /* what each vector is compared on: 2 everything; 1 tau and ddq (its QP solution and scalings are not
  * determined by its data); 0 status and torque limits only */
 extern const int {name}_golden_compared[{count}];
+/* 0 where rounding decides between "ok" and "limits relaxed" (a bound row's check at its tolerance):
+ * either is accepted, and the rest compared only where the status is the same */
+extern const int {name}_golden_status_determined[{count}];
 
 #endif
 """
@@ -447,6 +456,7 @@ const double {name}_golden_x[{count}][{big}_NX_ALLOC] = {{
 const int {name}_golden_nx[{count}] = {{{", ".join(str(int(v)) for v in golden.nx)}}};
 const int {name}_golden_status[{count}] = {{{", ".join(str(int(v)) for v in golden.status)}}};
 const int {name}_golden_compared[{count}] = {{{", ".join(str(int(v)) for v in golden.compared)}}};
+const int {name}_golden_status_determined[{count}] = {{{", ".join(str(int(v)) for v in golden.status_determined)}}};
 """
     return header, source
 
@@ -465,7 +475,9 @@ def golden_json(golden: Golden) -> dict:
                  "rounding-size changes of the QP data moved the answer (tau, ddq and x; relative), "
                  "command_spread: tau and ddq alone; determined: whether the answer's spread is within a tenth "
                  "of the test's tolerance, command_determined: the command's (the test compares what is "
-                 "determined, else status and torque limits only)"),
+                 "determined, else status and torque limits only), status_determined: whether rounding "
+                 "could give the other of \"ok\" and \"limits relaxed\" (a bound row's check at its "
+                 "tolerance; if not, either is accepted)"),
         "vectors": [
             {
                 "kind": s.kind,
@@ -477,6 +489,7 @@ def golden_json(golden: Golden) -> dict:
                 "command_spread": number(golden.spread[k, 0]),
                 "determined": bool(golden.determined[k]),
                 "command_determined": bool(golden.compared[k] >= COMPARED_COMMAND),
+                "status_determined": bool(golden.status_determined[k]),
             }
             for k, s in enumerate(golden.states)
         ],
@@ -788,7 +801,9 @@ def generate_sources(
                    # vectors whose answer rounding-size changes of the data move beyond the tolerance,
                    # and of those, the ones whose command (τ, q̈) they do not: compared on it
                    "undetermined": [int(k) for k in np.flatnonzero(~golden.determined)],
-                   "compared_on_command": [int(k) for k in np.flatnonzero(golden.compared == COMPARED_COMMAND)]},
+                   "compared_on_command": [int(k) for k in np.flatnonzero(golden.compared == COMPARED_COMMAND)],
+                   # and those whose status ("ok" or "limits relaxed") rounding decides
+                   "status_undetermined": [int(k) for k in np.flatnonzero(~golden.status_determined)]},
         "daqp": {"version": DAQP_VERSION, "sources": "daqp/"} if nx else None,
         "library": f"lib{name}.so",
         "files": sorted([*files, f"{name}_casadi.c", f"{name}_casadi.h", "golden.json", "manifest.json"]
