@@ -488,6 +488,26 @@ def test_a_cartesian_bound_braking_beyond_what_the_joint_acceleration_limits_all
     assert not any("acceleration limits move" in m for _, m in _warnings(spec))
 
 
+@pytest.mark.parametrize("priority", [1, 2])
+def test_a_task_on_a_frame_no_joint_moves_is_said_to_be_one_at_any_priority(tmp_path: Path, priority: int) -> None:
+    """Below another level, a task on the base was said to "conflict with the higher priorities"
+    (found from outside on a 29-joint human's fixed pelvis at priority 3); it conflicts with nothing."""
+    spec = tmp_path / "fixed.yaml"
+    reach = "{name: reach, type: position, frame: tool, priority: 1, gains: {kp: 10, kd: 6}, reference: {position: [0.5, 0, 0.6]}}"
+    base = (f"{{name: base, type: position, frame: base, priority: {priority}, gains: {{kp: 10, kd: 6}}, "
+            "reference: {position: [0, 0, 0]}}")
+    spec.write_text("version: 1\nname: fixed\nrobot: {model: iiwa14}\ntasks:\n"
+                    f"  - {reach if priority == 2 else base}\n  - {base if priority == 2 else reach.replace('priority: 1', 'priority: 2')}\n"
+                    "  - {name: damping, type: joint, priority: 3, gains: {kp: 0, kd: 6}}\n")
+    with pytest.raises(SpecError) as raised:
+        validate_file(spec)
+    errors = [(d.line, d.message) for d in raised.value.errors]
+    line = 6 if priority == 2 else 5
+    assert len(errors) == 1 and errors[0][0] == line, errors
+    assert f"priority {priority} is over-constrained" in errors[0][1] and "a frame no joint moves" in errors[0][1]
+    assert "conflict" not in errors[0][1]
+
+
 def test_a_cartesian_bound_on_a_frame_fixed_to_the_world_is_a_warning(tmp_path: Path) -> None:
     """No joint moves the base: a bound on it constrains nothing (found from outside: accepted with
     no word, or with advice to lower its braking to 0 m/s² where joint acceleration limits exist)."""

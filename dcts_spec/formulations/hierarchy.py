@@ -170,12 +170,12 @@ def least_squares_step(level: Level, acceleration: ca.SX, N: ca.SX, mass: ca.SX)
 
 
 class OverConstrainedLevel(ValueError):
-    """A priority level above the lowest whose tasks conflict with the higher ones (or, the highest
-    level, among themselves) everywhere."""
+    """A priority level above the lowest whose tasks conflict with the higher ones, or whose own
+    rows are dependent (with no level above them), everywhere."""
 
-    def __init__(self, priority: int, highest: bool = False):
+    def __init__(self, priority: int, own_rows: bool = False):
         why = ("its task rows are dependent, or ask for a direction no joint moves (a frame no joint moves, "
-               "tasks sharing rows), at every configuration tried" if highest else
+               "tasks sharing rows), at every configuration tried" if own_rows else
                "its tasks conflict with the higher priorities at every configuration tried")
         super().__init__(f"priority {priority} is over-constrained: {why}; only the lowest priority level may ask "
                          "for more than the freedom left")
@@ -206,6 +206,7 @@ def level_structure(problem: ControlProblem) -> LevelStructure:
     lo = np.where(np.isfinite(robot.limits.q_min), robot.limits.q_min, -np.pi)
     hi = np.where(np.isfinite(robot.limits.q_max), robot.limits.q_max, np.pi)
     deficient = np.zeros(len(levels), dtype=bool)
+    own_rows = np.zeros(len(levels), dtype=bool)  # deficient without the levels above too
     for _ in range(RANK_SAMPLES):
         out = [np.array(o) for o in f(rng.uniform(lo, hi), rng.uniform(-1.0, 1.0, problem.ref.shape[0]),
                                       problem.param_layout.defaults)]
@@ -214,14 +215,16 @@ def level_structure(problem: ControlProblem) -> LevelStructure:
         Minv = np.linalg.inv(M)
         for i, J in enumerate(jacobians):
             Jr = J @ N
-            rank = np.linalg.matrix_rank(Jr, RANK_TOLERANCE * max(1.0, np.abs(J).max()))
-            if rank < J.shape[0]:
+            tolerance = RANK_TOLERANCE * max(1.0, np.abs(J).max())
+            if np.linalg.matrix_rank(Jr, tolerance) < J.shape[0]:
                 deficient[i] = True
+                # (a frame no joint moves at priority 3 was said to conflict with priorities 1 and 2)
+                own_rows[i] |= np.linalg.matrix_rank(J, tolerance) < J.shape[0]
                 break
             Jbar = Minv @ Jr.T @ np.linalg.inv(Jr @ Minv @ Jr.T)
             N = N - Jbar @ Jr
     bad = [i for i in range(len(levels) - 1) if deficient[i]]
     if bad:
-        raise OverConstrainedLevel(levels[bad[0]].priority, highest=bad[0] == 0)
+        raise OverConstrainedLevel(levels[bad[0]].priority, own_rows=bad[0] == 0 or bool(own_rows[bad[0]]))
     exact = len(levels) - 1 if deficient[-1] else len(levels)
     return LevelStructure(exact, bool(deficient[-1]), problem.n - sum(lv.dim for lv in levels[:exact]))
