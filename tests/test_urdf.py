@@ -272,6 +272,27 @@ def test_a_urdf_joint_without_its_limits_is_named(tmp_path, limit, severity, wor
         assert any(words in m for m in messages), messages
 
 
+@pytest.mark.parametrize(("edit", "words"), [
+    (lambda urdf: urdf.replace('<robot name="roll_arm">', '<sdf version="1.6"><model name="roll_arm">')
+     .replace("</robot>", "</model></sdf>"), "not a URDF: its root element is <sdf>, where a URDF's is <robot>"),
+    (lambda urdf: urdf.replace('<joint name="tool_joint" type="fixed"><parent link="hand"/>',
+                               '<joint name="strut" type="fixed"><parent link="base"/><child link="hand"/></joint>\n'
+                               '  <joint name="tool_joint" type="fixed"><parent link="hand"/>'),
+     "link hand is the child of 2 joints (wrist_roll, strut): a closed kinematic loop"),
+])
+def test_a_file_that_is_no_urdf_or_no_tree_says_so(tmp_path, edit, words):
+    """An SDF (example-robot-data's Cassie) was refused for a joint's missing <limit>, and a link with
+    two parents as "Model does not have any body named …" (both found from outside)."""
+    path = tmp_path / "roll_arm.urdf"
+    path.write_text(edit(URDF))
+    spec_file = tmp_path / "arm.yaml"
+    spec_file.write_text(f"version: 1\nname: arm\nrobot:\n  urdf: {path.name}\ntasks:\n"
+                         "  - {name: posture, type: joint, priority: 1, gains: {kp: 10, kd: 6}, reference: {q: [0.3, 0.2, 0.1]}}\n")
+    with pytest.raises(SpecError) as raised:
+        validate_spec(load_spec(spec_file))
+    assert [d.line for d in raised.value.errors] == [4] and words in str(raised.value), str(raised.value)
+
+
 @pytest.mark.parametrize("given", [False, True])
 def test_placeholder_velocity_limits_of_a_urdf_are_named(tmp_path, given):
     """A URDF velocity limit of 1000 rad/s (Bolt's, Solo's) is no motor's: a warning names the joints

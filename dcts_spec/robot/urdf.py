@@ -38,6 +38,25 @@ def revolute_from_continuous(root: ElementTree.Element) -> list[str]:
     return names
 
 
+def check_tree(root: ElementTree.Element) -> None:
+    """A URDF's root is <robot>, and its joints make a tree: raise saying which it is not. An SDF
+    (example-robot-data's Cassie) was refused for a joint's missing <limit>, and a link that is the
+    child of two joints (a closed loop) as "Model does not have any body named l3"."""
+    if root.tag != "robot":
+        raise ValueError(f"not a URDF: its root element is <{root.tag}>, where a URDF's is <robot> (dcts reads URDF "
+                         "files; convert the model to one)")
+    parents: dict[str, list[str]] = {}
+    for joint in root.iter("joint"):
+        child = joint.find("child")
+        if child is not None:
+            parents.setdefault(child.get("link", "?"), []).append(joint.get("name", "?"))
+    for link, joints in parents.items():
+        if len(joints) > 1:
+            raise ValueError(f"link {link} is the child of {len(joints)} joints ({', '.join(joints)}): a closed "
+                             "kinematic loop, which a URDF cannot describe and dcts does not control (its joints "
+                             "make a tree); keep one of these joints")
+
+
 def check_limit_elements(root: ElementTree.Element) -> None:
     """urdfdom refuses a revolute or prismatic joint without a <limit> giving effort and velocity, and
     says only that the file "does not contain a valid URDF model": raise naming the joint instead."""
@@ -86,6 +105,7 @@ def load_model(path: Path) -> tuple[pin.Model, list[str]]:
     names unique, and the frames it renamed (`unique_frame_names`). Raises what Pinocchio raises
     for a URDF it cannot read (and ElementTree's ParseError for a file that is no XML)."""
     root = ElementTree.parse(path).getroot()
+    check_tree(root)
     check_limit_elements(root)
     if not revolute_from_continuous(root):  # (the file as it is: urdfdom's messages name its lines)
         model = pin.buildModelFromUrdf(str(path))
