@@ -68,6 +68,10 @@ STATE_TOLERANCE = 1e-5
 # (codegen.flags.QP_DATA_O0_FROM is this number), slower than the looped code at -O1. Counted
 # before CSE (~5 % above the generated function's count, which the -O level reads).
 LOOPED_PRODUCTS_FROM = 150_000
+# No C bundle beyond this (codegen): gcc needs ~12 kB per operation of one function even at -O0,
+# and the projector baseline on a 21-joint human model (~3 M operations, 74 MB of C) ran it out of
+# memory. `validate --check` says where a formulation is beyond it.
+MAX_QP_DATA_OPERATIONS = 500_000
 DATA_OUTPUTS = ("H", "f", "A", "lba", "uba", "lbx", "ubx", "tau0", "T", "ddq0", "Q", "s0", "S", "p0", "P", "excess",
                 "bound_shift")
 
@@ -485,7 +489,9 @@ def compile_check(report: ValidationReport) -> dict[str, dict]:
         law, looped, operations = sized_law(report.spec, problem, name, law)
         na = 0 if law.qp is None else law.qp.na
         kind = f"QP {law.nx} variables × {na} constraints" if law.nx else "closed form"
-        notes = "; ".join(law.notes + (["its large products as calls to looped kernels"] if looped else []))
+        too_large = (["more than the {:,} a C bundle takes: `dcts compile` refuses it, the Python runtime runs it"
+                      .format(MAX_QP_DATA_OPERATIONS)] if operations > MAX_QP_DATA_OPERATIONS else [])
+        notes = "; ".join(law.notes + (["its large products as calls to looped kernels"] if looped else []) + too_large)
         out[name] = {
             "ok": True,
             "variables": law.nx,

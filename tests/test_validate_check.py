@@ -28,6 +28,21 @@ def test_check_counts_match_the_compiled_function(spec) -> None:
         assert compiled <= info["instructions"] <= 1.1 * compiled, (name, compiled, info["instructions"])
         assert info["summary"].endswith(f"{info['instructions']} operations for the QP data (before CSE)") or \
             "(before CSE) (" in info["summary"], info["summary"]
+        assert "refuses" not in info["summary"]
+
+
+def test_check_says_which_formulations_no_bundle_takes(monkeypatch) -> None:
+    """A law beyond controller.MAX_QP_DATA_OPERATIONS was listed with its count as any other, and
+    `dcts compile` then refused it (the projector at 23 joints, found from outside)."""
+    import dcts_spec.controller as controller_module
+
+    report = validate_file(MINIMAL)
+    counts = {name: info["instructions"] for name, info in compile_check(report).items()}
+    limit = sorted(counts.values())[len(counts) // 2]
+    monkeypatch.setattr(controller_module, "MAX_QP_DATA_OPERATIONS", limit)
+    for name, info in compile_check(report).items():
+        refused = "more than the {:,} a C bundle takes: `dcts compile` refuses it".format(limit) in info["summary"]
+        assert info["ok"] and refused == (counts[name] > limit), (name, counts[name], info["summary"])
 
 
 @pytest.mark.skipif(not os.environ.get("DCTS_SLOW"), reason="28-joint TALOS from example-robot-data (~15 s): "

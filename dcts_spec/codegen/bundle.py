@@ -23,8 +23,8 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from ..controller import (ACTIVE_TOLERANCE, DATA_OUTPUTS, STATE_TOLERANCE, STATUS_LIMITS_RELAXED, STATUS_OK,
-                          TORQUE_TOLERANCE, Controller)
+from ..controller import (ACTIVE_TOLERANCE, DATA_OUTPUTS, MAX_QP_DATA_OPERATIONS, STATE_TOLERANCE,
+                          STATUS_LIMITS_RELAXED, STATUS_OK, TORQUE_TOLERANCE, Controller)
 from ..formulations import fallback
 from ..formulations.qp import BOUNDS, HARD
 from ..parameter_ramp import ramp_steps
@@ -36,8 +36,8 @@ from .layout import (C_DATA_OUTPUTS, array_lengths, casadi_work_lengths, daqp_st
                      workspace_struct)
 from .datasheet import (conventions_text, fmt_list, gains_text, limits_text, model_texts, parameters_doc_text,
                         parameters_struct, parameters_text, ref_layout_text, sizes_text, status_text, timing_text)
-from .flags import (C_WARNINGS, DAQP_OPTIMIZATION, FIRMWARE_CONTROLLER_OPTIMIZATION, HOST_OPTIMIZATION,
-                    MAX_QP_DATA_OPERATIONS, QP_DATA_O0_FROM, QP_DATA_O1_FROM, flags_text, qp_data_optimization)
+from .flags import (C_WARNINGS, DAQP_OPTIMIZATION, FIRMWARE_CONTROLLER_OPTIMIZATION, HOST_OPTIMIZATION, QP_DATA_O0_FROM,
+                    QP_DATA_O1_FROM, flags_text, qp_data_optimization)
 from .c_literals import c_array, c_double, c_rows
 from .model import model_record
 from .rigid_body import rigid_body_values

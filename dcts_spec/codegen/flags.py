@@ -42,11 +42,9 @@ QP_DATA_O1_FROM = 40_000  # QP-data operations from which the QP data are compil
 # Larger still, -O1 too takes minutes: the projector baseline's closed form on a 16-joint hand
 # (235 k operations, 5.6 MB of C) took gcc 280 s at -O1, 29 s and 2.9 GB at -O0. dcts's own QP
 # data stay below 100 k operations up to 29 joints. From this size on the control law's large
-# products are looped (controller.LOOPED_PRODUCTS_FROM, the same number).
+# products are looped (controller.LOOPED_PRODUCTS_FROM, the same number). No bundle beyond
+# controller.MAX_QP_DATA_OPERATIONS.
 QP_DATA_O0_FROM = LOOPED_PRODUCTS_FROM
-# No bundle beyond this: gcc needs ~12 kB per operation of one function even at -O0, and the same
-# baseline on a 21-joint human model (~3 M operations, 74 MB of C) ran it out of memory.
-MAX_QP_DATA_OPERATIONS = 500_000
 
 
 def qp_data_optimization(operations: int) -> tuple[str, ...]:
