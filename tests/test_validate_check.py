@@ -43,6 +43,12 @@ def test_check_says_which_formulations_no_bundle_takes(monkeypatch) -> None:
     for name, info in compile_check(report).items():
         refused = "more than the {:,} a C bundle takes: `dcts compile` refuses it".format(limit) in info["summary"]
         assert info["ok"] and refused == (counts[name] > limit), (name, counts[name], info["summary"])
+    # a law LOOPING_GAIN_AT_MOST times beyond it unrolled is not built again looped to be counted
+    monkeypatch.setattr(controller_module, "LOOPED_PRODUCTS_FROM", 1)
+    monkeypatch.setattr(controller_module, "MAX_QP_DATA_OPERATIONS", min(counts.values()) // 5)
+    for name, info in compile_check(report).items():
+        assert not info["looped_products"] and info["instructions"] == counts[name], name
+        assert "takes, looped or not (counted unrolled): `dcts compile` refuses it" in info["summary"], info["summary"]
 
 
 @pytest.mark.skipif(not os.environ.get("DCTS_SLOW"), reason="28-joint TALOS from example-robot-data (~15 s): "
