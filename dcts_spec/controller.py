@@ -506,11 +506,11 @@ def compile_check(report: ValidationReport) -> dict[str, dict]:
             law, looped, operations = looped_law(report.spec, problem, name)
         na = 0 if law.qp is None else law.qp.na
         kind = f"QP {law.nx} variables × {na} constraints" if law.nx else "closed form"
-        too_large = (["more than the {:,} a C bundle takes{}: `dcts compile` refuses it, the Python runtime runs it"
-                      .format(MAX_QP_DATA_OPERATIONS, "" if looped or operations < LOOPED_PRODUCTS_FROM else
-                              ", looped or not (counted unrolled)")]
-                     if operations > MAX_QP_DATA_OPERATIONS else [])
-        notes = "; ".join(law.notes + (["its large products as calls to looped kernels"] if looped else []) + too_large)
+        notes = law.notes + (["its large products as calls to looped kernels"] if looped else [])
+        if operations > MAX_QP_DATA_OPERATIONS:
+            unrolled = "" if looped or operations < LOOPED_PRODUCTS_FROM else ", looped or not (counted unrolled)"
+            notes.append(f"more than the {MAX_QP_DATA_OPERATIONS:,} a C bundle takes{unrolled}: `dcts compile` refuses "
+                         "it, the Python runtime runs it")
         out[name] = {
             "ok": True,
             "variables": law.nx,
@@ -519,6 +519,7 @@ def compile_check(report: ValidationReport) -> dict[str, dict]:
             "instructions_counted": "before common-subexpression elimination",
             "looped_products": looped,
             "notes": law.notes,
-            "summary": f"{kind}, {operations} operations for the QP data (before CSE)" + (f" ({notes})" if notes else ""),
+            "summary": f"{kind}, {operations} operations for the QP data (before CSE)"
+                       + (f" ({'; '.join(notes)})" if notes else ""),
         }
     return out
