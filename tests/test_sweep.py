@@ -538,6 +538,7 @@ def test_a_worst_case_replays_with_dcts_simulate(spec_file, campaign_file, seria
     assert replay.is_file() and (replayed_folder / "summary.json").is_file()
 
 
+@pytest.mark.slow  # (the default tier resumes a serial study: test_an_interrupted_optimization_resumes_with_new_values)
 def test_optimize_tunes_the_gain_and_resumes(ray_session, spec_file, tmp_path) -> None:
     campaign_file = tmp_path / "campaign.yaml"
     campaign_file.write_text(CAMPAIGN.replace("samples: 6", "samples: 3"))
