@@ -65,9 +65,10 @@ def resolve_robot(spec: Spec) -> tuple[Robot, list[Diagnostic]]:
                 ("robot",), f"the URDF gives {', '.join(unlimited)} no {attribute} limit ({attribute}=\"0\" or none): "
                             f"driven without one; give limits.{key} to bound them", "warning"))
     names = [model.names[j] for j in range(1, model.njoints)]  # (one velocity each: revolute or prismatic)
+    prismatic = prismatic_joints(model)
     if spec.limits.joint_velocity is None:
-        diags += _placeholder_velocities(src, names, urdf_limits.v_max, prismatic_joints(model))
-    limits = _merge_limits(spec, urdf_limits, _JointUnits(names, prismatic_joints(model)), diags)
+        diags += _placeholder_velocities(src, names, urdf_limits.v_max, prismatic)
+    limits = _merge_limits(spec, urdf_limits, _JointUnits(names, prismatic), diags)
     bounds = _cartesian_bounds(spec, model, diags)
     if any(d.severity == "error" for d in diags):
         raise SpecError(diags)
