@@ -89,6 +89,15 @@ RELAX_MARGIN = 1e-6
 # cannot be met) would then be feasible, and 943 of the bench spec's 3,000 closed-loop states
 # changed, by up to 46 Nm.
 SLIVER_WIDENING = 1e-10
+# ... and if DAQP still fails it, once more at DAQP's own default primal tolerance (its answer is
+# checked on the rows at FEASIBILITY_TOLERANCE all the same). After a relaxation a stage's held
+# rows can be nearly dependent (ten equalities of condition 3e4 on a 29-joint human): DAQP called
+# a third of the stages infeasible at 1e-8 where HiGHS found them feasible, and the answer
+# depended on which ones, moving by up to 15 % of the torques with relative changes of 1e-13 in
+# the data. Over the golden states that relax in seven 15–30-joint specs (386 states), those whose
+# torques move by more than 1e-3 of their size that way went from 10 to 4 (3 of them a dual
+# arm's, unchanged).
+SLIVER_PRIMAL_TOL = 1e-6
 # The relaxation is always feasible (every bound has its slack), so a failure is DAQP's, and the
 # stage is run again at the next, gentler step. DAQP cycled at ρ = 1e-8 on a state of a spec with
 # the same task at two levels (golden vector: the Python runtime fell back, the C one, warm,
@@ -104,6 +113,13 @@ EXTRAPOLATION_MARGIN = 1e-9
 # followed parted by 4e-4 (a 26-joint Centauro, a status-"ok" golden vector).
 BACKOFF_LIMIT = 1.0
 PROXIMAL_ITERATIONS = 30
+# The relaxation's LP may need more: its slacks start at 0 and the iterates climb a face of the
+# torque polytope one active row at a time. On a 29-joint human under a heavy load (a free
+# acceleration of 1.2e9 rad/s² on a light joint) the 30th iterate was still falling, Σwσ 0.94 %
+# above the least, with bounds crossed by up to 1,455 rad/s² that could hold (HiGHS: 0); it
+# reached the least at 60–100. It ends sooner wherever it converges (the golden states of four
+# 7–29-joint specs: a median of 1–2 QPs, 4 of 144 relaxations at 30).
+RELAX_ITERATIONS = 100
 # (1e-10 was at DAQP's resolution: 5 % of the bench's closed-loop states ran a stage's 30 QPs
 # with a variable its objective does not see moving 3e-10 each time, and no other change)
 PROXIMAL_TOLERANCE = 1e-9
@@ -251,6 +267,8 @@ class Cascade:
         if x is None and (feasible or self.relaxed_point is not None):  # (see SLIVER_WIDENING)
             qp = qp.widened(SLIVER_WIDENING)
             x, _, multipliers = daqp_qp(H, f, qp)
+            if x is None:
+                x, _, multipliers = daqp_qp(H, f, qp, SLIVER_PRIMAL_TOL)
         if x is not None and qp.faint.size and not self._holds(x):  # (see DAQP_ZERO_TOL)
             qp = FixedEliminated.of(self.A, lower, upper, self._layouts, faint_bounded=True)
             x, _, multipliers = daqp_qp(H, f, qp)
@@ -273,7 +291,8 @@ class Cascade:
         lo[below] = hi[below] = self.nominal[below]  # (s = 1, δ = 0)
         return self._solve(self.H, self.f, lo, hi)
 
-    def _proximal(self, weights: np.ndarray, linear: np.ndarray, step: float, lbx, ubx) -> np.ndarray | None:
+    def _proximal(self, weights: np.ndarray, linear: np.ndarray, step: float, lbx, ubx,
+                  iterations: int = PROXIMAL_ITERATIONS) -> np.ndarray | None:
         """min φ(x) = ½Σwⱼxⱼ² + linearᵀx over the feasible set, by the proximal-point method:
         x = argmin φ(x)/ρ + ½‖x − c‖² (scaled variables), a fixed point of which minimizes φ.
 
@@ -287,19 +306,20 @@ class Cascade:
         may fail on the thin feasible sets the levels above leave: if it does at once, ρ starts
         again at 1 and shrinks tenfold per step down to `step`; a later failed solve is tried
         again at a larger ρ (`BACKOFF_LIMIT`), and past that the last iterate is the answer
-        (feasible, and as close to the minimum as DAQP could go)."""
-        x = self._proximal_steps(weights, linear, step, step, lbx, ubx)
+        (feasible, and as close to the minimum as DAQP could go). At most `iterations` QPs a run."""
+        x = self._proximal_steps(weights, linear, step, step, lbx, ubx, iterations)
         if x is None and weights.any():
-            x = self._proximal_steps(weights, linear, 1.0, step, lbx, ubx)
+            x = self._proximal_steps(weights, linear, 1.0, step, lbx, ubx, iterations)
         return x
 
-    def _proximal_steps(self, weights, linear, rho, step, lbx, ubx) -> np.ndarray | None:
+    def _proximal_steps(self, weights, linear, rho, step, lbx, ubx,
+                        iterations: int = PROXIMAL_ITERATIONS) -> np.ndarray | None:
         center, x = self.nominal, None
         best_bounds = None if weights.any() else self._best_bounds(linear, lbx, ubx)
         seen = (weights != 0.0) | (linear != 0.0)
         hessian, hessian_rho = None, None
         floor, solved_rho = step, None  # ρ stays ≥ floor; the ρ of the last QP DAQP solved
-        for _ in range(PROXIMAL_ITERATIONS):
+        for _ in range(iterations):
             if rho != hessian_rho:  # (ρ stays at `step` once there: the same Hessian)
                 hessian, hessian_rho = np.diag(1.0 + weights / rho), rho
             solved = self._solve(hessian, linear / rho - center, lbx, ubx)
@@ -760,7 +780,7 @@ class Cascade:
         linear = np.concatenate([np.zeros(nx), weights])
         x = None
         for step in RELAX_STEPS:  # (see RELAX_STEPS)
-            x = slack._proximal(np.zeros(nx + r), linear, step, slack.lbx, slack.ubx)
+            x = slack._proximal(np.zeros(nx + r), linear, step, slack.lbx, slack.ubx, RELAX_ITERATIONS)
             if x is not None:
                 break
         if x is None:

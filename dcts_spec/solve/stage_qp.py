@@ -194,28 +194,31 @@ def constant_rows(A_free: np.ndarray, row_size: np.ndarray) -> np.ndarray:
     return row_sizes(A_free) <= CONSTANT_ROW * row_size
 
 
-def daqp_qp(H: np.ndarray, f: np.ndarray, qp: FixedEliminated) -> tuple[np.ndarray | None, int, np.ndarray]:
+def daqp_qp(H: np.ndarray, f: np.ndarray, qp: FixedEliminated,
+            primal_tol: float | None = None) -> tuple[np.ndarray | None, int, np.ndarray]:
     """One ordinary QP: min ½xᵀHx + fᵀx on the rows and bounds of `qp` (equal ends: an equality),
     solved by DAQP for the free variables. Returns x (None if DAQP found no solution), its exit
     flag and DAQP's multipliers of `qp`'s rows (`stationary` reads them); with no variable free,
     the fixed point, for the caller's check of the rows."""
     free = qp.free
     if free.size == f.size:
-        return _daqp(H, f, qp)
+        return _daqp(H, f, qp, primal_tol)
     x = qp.point.copy()
     if not free.size:
         return x, 1, np.zeros(qp.lower.size)
-    solved, flag, multipliers = _daqp(H[qp.hessian_index], (f + H @ x)[free], qp)
+    solved, flag, multipliers = _daqp(H[qp.hessian_index], (f + H @ x)[free], qp, primal_tol)
     if solved is None:
         return None, flag, multipliers
     x[free] = solved
     return x, flag, multipliers
 
 
-def _daqp(H: np.ndarray, f: np.ndarray, qp: FixedEliminated) -> tuple[np.ndarray | None, int, np.ndarray]:
+def _daqp(H: np.ndarray, f: np.ndarray, qp: FixedEliminated,
+          primal_tol: float | None) -> tuple[np.ndarray | None, int, np.ndarray]:
     # (no sense: DAQP takes the rows with equal ends for equalities itself, as in the C runtime)
+    settings = DAQP_SETTINGS if primal_tol is None else {**DAQP_SETTINGS, "primal_tol": primal_tol}
     x, _, flag, info = daqp.solve(np.ascontiguousarray(H), np.ascontiguousarray(f), qp.A, qp.upper, qp.lower,
-                                  **DAQP_SETTINGS)
+                                  **settings)
     if flag != 1 or not np.isfinite(x).all():
         return None, int(flag), info["lam"]
     return np.asarray(x, dtype=float), int(flag), info["lam"]
