@@ -279,10 +279,25 @@ def test_a_urdf_joint_without_its_limits_is_named(tmp_path, limit, severity, wor
                                '<joint name="strut" type="fixed"><parent link="base"/><child link="hand"/></joint>\n'
                                '  <joint name="tool_joint" type="fixed"><parent link="hand"/>'),
      "link hand is the child of 2 joints (wrist_roll, strut): a closed kinematic loop"),
+    (lambda urdf: urdf.replace('name="shoulder" type="revolute"', 'name="shoulder" type="spherical"'),
+     "joint shoulder has type 'spherical': a URDF joint is revolute, continuous, prismatic, fixed, floating or planar"),
+    (lambda urdf: urdf.replace('<axis xyz="0 1 0"/>', '<axis xyz="0 0 0"/>'),
+     "joint shoulder's <axis xyz=\"0 0 0\"> gives no direction"),
+    (lambda urdf: urdf.replace('effort="80"', 'effort="-80"'), "joint shoulder's <limit effort=\"-80\">: a number ≥ 0"),
+    (lambda urdf: urdf.replace('<child link="hand"/>', '<child link="palm"/>'),
+     "joint wrist_roll's child link 'palm' is not a <link> of the URDF"),
+    (lambda urdf: urdf.replace('name="forearm_roll"', 'name="shoulder"'), "two joints named 'shoulder'"),
+    (lambda urdf: urdf.replace('<link name="tool"/>', '<link name="tool"/>\n  <link name="stray"/>'),
+     "2 links have no parent joint (base, stray)"),
+    (lambda urdf: urdf.replace('name="shoulder" type="revolute"', 'name="shoulder" type="floating"'),
+     "joint shoulder is a floating joint (6 DOF): dcts drives fixed-base robots"),
 ])
 def test_a_file_that_is_no_urdf_or_no_tree_says_so(tmp_path, edit, words):
     """An SDF (example-robot-data's Cassie) was refused for a joint's missing <limit>, and a link with
-    two parents as "Model does not have any body named …" (both found from outside)."""
+    two parents as "Model does not have any body named …" (both found from outside). Joints and links
+    urdfdom refuses only as "does not contain a valid URDF model", or reads without complaint (an
+    axis of 0 0 0, a negative effort), and a floating joint (an internal error, exit 3) are named
+    (found from outside by a mutation fuzz of specs and URDFs)."""
     path = tmp_path / "roll_arm.urdf"
     path.write_text(edit(URDF))
     spec_file = tmp_path / "arm.yaml"

@@ -142,7 +142,9 @@ def _load_model(spec: Spec, diags: list[Diagnostic]) -> tuple[pin.Model | None, 
     else:
         path = _urdf_path(spec)
         if not path.is_file():
-            message = f"{path} is a folder, not a URDF file" if path.is_dir() else f"URDF file not found: {path}"
+            message = (f"{path} is a folder, not a URDF file" if path.is_dir() else
+                       f"{path} is not a regular file (a pipe or a device), not a URDF file" if path.exists() else
+                       f"URDF file not found: {path}")
             diags.append(src.diagnostic(where, message))
             return None, path
     try:
@@ -191,6 +193,14 @@ def _load_model(spec: Spec, diags: list[Diagnostic]) -> tuple[pin.Model | None, 
     if outside:
         return None, path
     model = lock_joints(full, locked)
+    several = [(model.names[j], joint) for j, joint in enumerate(model.joints) if j and (joint.nq != 1 or joint.nv != 1)]
+    for name, joint in several:  # (the limits, the QP data and the C hold one coordinate per joint)
+        diags.append(src.diagnostic(where, (
+            f"joint {name} is a {multi_dof_kind(joint)} joint ({joint.nv} DOF): dcts drives fixed-base robots whose "
+            f"joints have one coordinate each (revolute, continuous, prismatic); lock it at its neutral position "
+            f"with robot.locked_joints: {{{name}: 0}}, or make it fixed in the URDF")))
+    if several:
+        return None, path
     if model.nv == 0:
         movable = "" if not locked else f" once {', '.join(locked)} are locked"
         diags.append(src.diagnostic(where, f"the URDF {path.name} has no movable joint{movable}: nothing to control"))

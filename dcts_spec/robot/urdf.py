@@ -9,6 +9,7 @@ takes the short way round to its target (tasks/joint.py). Its effort and velocit
 
 from __future__ import annotations
 
+import math
 from collections import Counter
 from pathlib import Path
 from xml.etree import ElementTree
@@ -45,16 +46,54 @@ def check_tree(root: ElementTree.Element) -> None:
     if root.tag != "robot":
         raise ValueError(f"not a URDF: its root element is <{root.tag}>, where a URDF's is <robot> (dcts reads URDF "
                          "files; convert the model to one)")
+    links = [link.get("name", "?") for link in root.findall("link")]
+    joints = [joint.get("name", "?") for joint in root.findall("joint")]
+    for kind, names in (("links", links), ("joints", joints)):
+        twice = sorted(name for name, count in Counter(names).items() if count > 1)
+        if twice:
+            raise ValueError(f"two {kind} named {twice[0]!r}: each link and each joint of a URDF has a name of its own")
     parents: dict[str, list[str]] = {}
-    for joint in root.iter("joint"):
-        child = joint.find("child")
-        if child is not None:
-            parents.setdefault(child.get("link", "?"), []).append(joint.get("name", "?"))
+    for joint in root.findall("joint"):
+        for end in ("parent", "child"):
+            element = joint.find(end)
+            if element is None or element.get("link") not in links:
+                named = "" if element is None else f" {element.get('link')!r}"
+                raise ValueError(f"joint {joint.get('name', '?')}'s {end} link{named} is not a <link> of the URDF")
+        parents.setdefault(joint.find("child").get("link"), []).append(joint.get("name", "?"))
+    roots = [link for link in links if link not in parents]
+    if len(roots) > 1:
+        raise ValueError(f"{len(roots)} links have no parent joint ({', '.join(roots[:5])}): a URDF's links make one "
+                         "tree from one root; join them with joints (fixed ones, if they do not move)")
     for link, joints in parents.items():
         if len(joints) > 1:
             raise ValueError(f"link {link} is the child of {len(joints)} joints ({', '.join(joints)}): a closed "
                              "kinematic loop, which a URDF cannot describe and dcts does not control (its joints "
                              "make a tree); keep one of these joints")
+
+
+URDF_JOINT_TYPES = ("revolute", "continuous", "prismatic", "fixed", "floating", "planar")
+
+
+def check_joints(root: ElementTree.Element) -> None:
+    """Each joint's type is one of URDF's, and a moving joint's <axis> has a direction: raise naming
+    the joint. urdfdom refuses an unknown type as "does not contain a valid URDF model", and reads
+    an axis of 0 0 0 as given, which left a joint that moves nothing ("moves no mass", said of
+    links that have mass; found from outside)."""
+    for joint in root.findall("joint"):  # (not iter: a <transmission> names joints too)
+        name, kind = joint.get("name", "?"), joint.get("type")
+        if kind not in URDF_JOINT_TYPES:
+            raise ValueError(f"joint {name} has type {kind!r}: a URDF joint is {', '.join(URDF_JOINT_TYPES[:-1])} "
+                             f"or {URDF_JOINT_TYPES[-1]}")
+        axis = joint.find("axis")
+        if kind in ("fixed", "floating") or axis is None:  # (no <axis>: 1 0 0)
+            continue
+        try:
+            direction = [float(v) for v in axis.get("xyz", "1 0 0").split()]
+        except ValueError:
+            direction = []
+        if len(direction) != 3 or not all(math.isfinite(v) for v in direction) or not any(direction):
+            raise ValueError(f"joint {name}'s <axis xyz=\"{axis.get('xyz')}\"> gives no direction: three finite "
+                             "numbers, not all 0 (a unit vector, e.g. 0 0 1)")
 
 
 def check_limit_elements(root: ElementTree.Element) -> None:
@@ -64,6 +103,17 @@ def check_limit_elements(root: ElementTree.Element) -> None:
         if joint.get("type") not in ("revolute", "prismatic"):
             continue
         limit = joint.find("limit")
+        for attribute in ("lower", "upper", "effort", "velocity"):
+            text = None if limit is None else limit.get(attribute)
+            if text is None:
+                continue
+            try:
+                value = float(text)
+            except ValueError:
+                value = math.nan
+            if not math.isfinite(value) or (attribute in ("effort", "velocity") and value < 0):
+                allowed = "a number ≥ 0 (a magnitude; 0 for none)" if attribute in ("effort", "velocity") else "a finite number"
+                raise ValueError(f"joint {joint.get('name', '?')}'s <limit {attribute}=\"{text}\">: {allowed}")
         missing = ["<limit>"] if limit is None else [a for a in ("effort", "velocity") if limit.get(a) is None]
         if missing:
             raise ValueError(f"joint {joint.get('name', '?')} ({joint.get('type')}) has no {' or '.join(missing)}, "
@@ -106,6 +156,7 @@ def load_model(path: Path) -> tuple[pin.Model, list[str]]:
     for a URDF it cannot read (and ElementTree's ParseError for a file that is no XML)."""
     root = ElementTree.parse(path).getroot()
     check_tree(root)
+    check_joints(root)
     check_limit_elements(root)
     if not revolute_from_continuous(root):  # (the file as it is: urdfdom's messages name its lines)
         model = pin.buildModelFromUrdf(str(path))
