@@ -303,23 +303,41 @@ def _check_moved_inertia(spec: Spec, model: pin.Model, diags: list[Diagnostic]) 
 
 
 def _add_frames(spec: Spec, model: pin.Model, diags: list[Diagnostic]) -> None:
+    """`robot.frames` into the model, each after its parent whatever their order in the file (a
+    frame on a frame written below it was "no frame named" it, found from outside)."""
     src = spec.source
+    pending = {}
     for name, frame in spec.robot.frames.items():
-        path = ("robot", "frames", name)
         if model.existFrame(name):
-            diags.append(src.diagnostic(path, f"the robot already has a frame named {name!r}; choose another name"))
-            continue
-        if not model.existFrame(frame.parent):
+            diags.append(src.diagnostic(("robot", "frames", name),
+                                        f"the robot already has a frame named {name!r}; choose another name"))
+        else:
+            pending[name] = frame
+    while pending:
+        ready = [name for name, frame in pending.items() if model.existFrame(frame.parent)]
+        if not ready:
+            break
+        for name in ready:
+            frame = pending.pop(name)
+            parent = model.frames[model.getFrameId(frame.parent)]
+            rpy = to_si(list(frame.rpy), frame.unit)
+            local = pin.SE3(pin.rpy.rpyToMatrix(*rpy), np.array(frame.xyz))
+            model.addFrame(pin.Frame(name, parent.parentJoint, model.getFrameId(frame.parent), parent.placement * local,
+                                     pin.FrameType.OP_FRAME))
+    for name, frame in pending.items():
+        path = ("robot", "frames", name, "parent")
+        if frame.parent in pending:  # (a frame left waits on another one left: a cycle, or a missing parent)
+            chain = [name]
+            while pending[chain[-1]].parent in pending and pending[chain[-1]].parent not in chain:
+                chain.append(pending[chain[-1]].parent)
+            last = pending[chain[-1]].parent
+            message = (f"frames attached to each other in a cycle ({' → '.join(chain + [last])}): attach one of them "
+                       "to a link" if last in chain else
+                       f"attached to frame {frame.parent!r}, which is not placed either (see its error)")
+            diags.append(src.diagnostic(path, message))
+        else:
             hint = frame_candidates(frame.parent, [f.name for f in model.frames], spec)
-            diags.append(src.diagnostic(path + ("parent",), f"no link, joint or frame named {frame.parent!r}{hint}"))
-            continue
-        parent = model.frames[model.getFrameId(frame.parent)]
-        rpy = to_si(list(frame.rpy), frame.unit)
-        local = pin.SE3(pin.rpy.rpyToMatrix(*rpy), np.array(frame.xyz))
-        placement = parent.placement * local
-        model.addFrame(
-            pin.Frame(name, parent.parentJoint, model.getFrameId(frame.parent), placement, pin.FrameType.OP_FRAME)
-        )
+            diags.append(src.diagnostic(path, f"no link, joint or frame named {frame.parent!r}{hint}"))
 
 
 def _add_payloads(spec: Spec, model: pin.Model, diags: list[Diagnostic]) -> None:

@@ -11,7 +11,7 @@ from typing import Annotated, Literal
 
 from pydantic import Field, model_validator
 
-from .types import JOINT_VALUE, LENGTH, FieldError, Number, Range, StrictModel, Vec3
+from .types import JOINT_VALUE, LENGTH, FieldError, Flag, Number, Range, StrictModel, Vec3
 from .units import AngleUnit
 
 RADIUS = Range(0, 100, "m", open=True)
@@ -92,7 +92,7 @@ class CollisionPair(StrictModel):
 class CollisionSpec(StrictModel):
     """Collision avoidance as hard bounds: each watched pair's distance stays ≥ its minimum."""
 
-    default_primitives: bool = Field(True, description=(
+    default_primitives: Flag = Field(True, description=(
         "start from the built-in robot's primitives (iiwa14, panda: every link covered); a URDF robot has none"),
         examples=[True])
     links: dict[str, list[LinkPrimitive]] = Field(default_factory=dict, description=(
@@ -103,7 +103,7 @@ class CollisionSpec(StrictModel):
     watch: Literal["all", "listed"] = Field("all", description=(
         "all: every link against every obstacle and (with self_collision) every pair of links not joined by a "
         "joint, minus `exclude`; listed: only the pairs in `pairs`"), examples=["all"])
-    self_collision: bool = Field(True, description="with watch: all, also keep the links apart from each other",
+    self_collision: Flag = Field(True, description="with watch: all, also keep the links apart from each other",
                                  examples=[True])
     exclude: list[PairNames] = Field(default_factory=list, description="pairs not watched (with watch: all)",
                                      examples=[[["link1", "link3"]]])

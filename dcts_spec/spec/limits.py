@@ -7,7 +7,7 @@ from typing import Annotated, Literal
 from pydantic import Field, model_validator
 
 from .collision import CollisionSpec
-from .types import JOINT_VALUE, LENGTH, FieldError, Number, Range, ScalarOrVector, StrictModel
+from .types import JOINT_VALUE, LENGTH, FieldError, Flag, Number, Range, ScalarOrVector, StrictModel
 from .units import AngleUnit, AngularAccelerationUnit, AngularVelocityUnit
 
 _ALLOW_OUTSIDE_URDF = "accept limits wider than the URDF's (with a warning) instead of refusing them"
@@ -23,7 +23,7 @@ class JointPositionLimits(StrictModel):
                                        "joint), one value or one per joint; default: the URDF's",
                                        examples=[160, [165, 115, 165, 115, 165, 115, 170]])
     unit: AngleUnit = Field("rad", description="unit of min and max", examples=["deg"])
-    allow_outside_urdf: bool = Field(False, description=_ALLOW_OUTSIDE_URDF, examples=[False])
+    allow_outside_urdf: Flag = Field(False, description=_ALLOW_OUTSIDE_URDF, examples=[False])
 
     @model_validator(mode="after")
     def _some_bound(self) -> "JointPositionLimits":
@@ -38,7 +38,7 @@ class JointVelocityLimits(StrictModel):
     max: Annotated[ScalarOrVector, Range(0, 1e4, open=True)] = Field(description="in `unit` (rad/s or deg/s; m/s for a prismatic joint), one value or "
                                 "one per joint", examples=[1.5, [100, 110, 100, 130, 130, 180, 180]])
     unit: AngularVelocityUnit = Field("rad/s", description="unit of max", examples=["deg/s"])
-    allow_outside_urdf: bool = Field(False, description=_ALLOW_OUTSIDE_URDF, examples=[False])
+    allow_outside_urdf: Flag = Field(False, description=_ALLOW_OUTSIDE_URDF, examples=[False])
 
 
 class JointAccelerationLimits(StrictModel):
@@ -55,7 +55,7 @@ class JointTorqueLimits(StrictModel):
     max: Annotated[ScalarOrVector, Range(0, 1e6, "Nm (N for a prismatic joint)", open=True)] = Field(description="in Nm (N for a prismatic joint), one value or one per joint",
                                 examples=[100, [176, 176, 110, 110, 110, 40, 40]])
     unit: Literal["Nm"] = Field("Nm", description="unit of max: Nm", examples=["Nm"])
-    allow_outside_urdf: bool = Field(False, description=_ALLOW_OUTSIDE_URDF, examples=[False])
+    allow_outside_urdf: Flag = Field(False, description=_ALLOW_OUTSIDE_URDF, examples=[False])
 
 
 class CartesianLimit(StrictModel):

@@ -148,6 +148,9 @@ def _message(error: dict, path: KeyPath, rest: tuple, data: Any, root: type[Base
         allowed = _allowed_keys(root, parent, data)
         hint = did_you_mean(key, allowed)
         return f"unknown key {shown(key)}{hint}; allowed keys: {', '.join(allowed)}" if allowed else f"unknown key {shown(key)}"
+    if kind == "missing" and rest and isinstance(rest[0], int):  # (a fixed-length list, too short)
+        given = _value_at(data, path)
+        return f"too few values: got {len(given)}, value {rest[0] + 1} is missing"
     if kind == "missing":
         return f"missing required key {rest[0]!r}" if rest else "missing required value"
     if kind == "literal_error":
@@ -172,6 +175,10 @@ def _message(error: dict, path: KeyPath, rest: tuple, data: Any, root: type[Base
         return f"{shown(error['input'])} is not an identifier (letters, digits and _, not starting with a digit)"
     if kind == "string_too_long":
         return f"at most {error['ctx']['max_length']} characters, got {len(error['input'])}"
+    if kind in ("bool_type", "bool_parsing"):
+        got = error["input"]
+        unquote = " (remove the quotes)" if isinstance(got, str) and got.lower() in ("true", "false") else ""
+        return f"expected true or false, got {_describe(got)}{unquote}"
     if kind == "string_type":
         return f"expected text, got {_describe(error['input'])}"
     if kind in ("float_type", "float_parsing"):
@@ -185,6 +192,10 @@ def _message(error: dict, path: KeyPath, rest: tuple, data: Any, root: type[Base
         return f"must be {symbol} {error['ctx'][bound]:g}, got {_describe(error['input'])}"
     if kind == "too_short" and error["ctx"].get("min_length") == 1:
         return "expected at least one entry, got an empty list"
+    if kind in ("too_short", "too_long"):
+        most = kind == "too_long"
+        limit = error["ctx"]["max_length" if most else "min_length"]
+        return f"expected at {'most' if most else 'least'} {limit} values, got {error['ctx']['actual_length']}"
     message = error["msg"]
     for prefix in ("Value error, ", "Assertion failed, "):
         message = message.removeprefix(prefix)

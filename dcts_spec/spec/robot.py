@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from typing import Annotated, Literal
 
 from pydantic import Field, field_validator, model_validator
@@ -10,6 +11,7 @@ from .types import JOINT_VALUE, LENGTH, Number, Range, StrictModel, Vec3
 from .units import AngleUnit
 
 
+_IDENTIFIER = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
 _NAME_MAX, _PATH_MAX = 255, 4096  # Linux's NAME_MAX and PATH_MAX, the smallest usual limits
 # (also the range a campaign's draws of a scenario payload's mass are held to: campaign/document.py)
 PAYLOAD_MASS = Range(0, 1e4, "kg", open=True)
@@ -77,11 +79,25 @@ class RobotSpec(StrictModel):
         """A path the file system can look up (a longer one is an OSError, not 'not found')."""
         if path is None:
             return path
+        if not path.strip():
+            raise ValueError("an empty path: give the path of a URDF file, relative to the spec file")
         longest = max(len(part.encode()) for part in path.split("/"))
         if longest > _NAME_MAX or len(path.encode()) > _PATH_MAX:
             raise ValueError(f"not a possible file path: a name of at most {_NAME_MAX} bytes, a path of at most "
                              f"{_PATH_MAX}; got a name of {longest} bytes in a path of {len(path.encode())}")
         return path
+
+    @field_validator("frames")
+    @classmethod
+    def _identifiers(cls, frames: dict[str, FrameSpec]) -> dict[str, FrameSpec]:
+        """A frame the spec adds is named as a task is: its name goes into the generated C (comments,
+        run-time parameter names), where `*/` ended a comment and broke the build (found from
+        outside)."""
+        for name in frames:
+            if not _IDENTIFIER.fullmatch(name):
+                raise ValueError(f"frame name {name!r} is not an identifier (letters, digits and _, not starting "
+                                 "with a digit)")
+        return frames
 
     @model_validator(mode="after")
     def _one_source(self) -> "RobotSpec":

@@ -6,7 +6,7 @@ from typing import Annotated, Literal
 
 from pydantic import Field, model_validator
 
-from .types import JOINT_VALUE, LENGTH, FieldError, Integer, Number, NumberList, Range, ScalarOrVector, StrictModel, Vec3, size_of
+from .types import JOINT_VALUE, LENGTH, FieldError, Flag, Integer, Number, NumberList, Range, ScalarOrVector, StrictModel, Vec3, size_of
 from .units import AngleUnit
 
 TaskType = Literal["position", "orientation", "pose", "joint"]
@@ -73,9 +73,9 @@ class Reference(StrictModel):
     q: Annotated[NumberList, JOINT_VALUE] | None = Field(None, description="target joint positions in `unit` (m for a prismatic joint), "
                                  "one per joint of the task", examples=[[0, 30, 0, -60, 0, 60, 0]])
     unit: AngleUnit = Field("rad", description="unit of rpy or q", examples=["deg"])
-    input: bool = Field(False, description="the reference is an input of the controller at run time (waypoints "
+    input: Flag = Field(False, description="the reference is an input of the controller at run time (waypoints "
                         "in simulation)", examples=[True])
-    feedforward: bool = Field(
+    feedforward: Flag = Field(
         False, description="with input: also take a velocity (m/s, rad/s) and an acceleration (m/s², rad/s²) "
         "feed-forward per task axis", examples=[True]
     )

@@ -53,6 +53,8 @@ def _scalar_or_list(value: Any) -> float | tuple[float, ...]:
         if not value:
             raise ValueError("expected a number or a non-empty list of numbers, got an empty list")
         return _number_list(value)
+    if isinstance(value, float) and not math.isfinite(value):
+        raise ValueError(f"expected a finite number or a list of finite numbers, got {shown(value)}")
     try:
         return _number(value)
     except ValueError:
@@ -72,6 +74,8 @@ _LIST_SCHEMA = {"type": "array", "items": _NUMBER_SCHEMA, "minItems": 1}
 # A native (strict, finite) float rather than a PlainValidator: a plain validator replaces the core schema,
 # and pydantic then silently drops field constraints such as `Field(gt=0)` (in validation and JSON Schema).
 Number = Annotated[float, Strict(), AllowInfNan(False)]
+# Strict too: a quoted 'true' or 'yes' is text, refused as `kp: '100'` is (found from outside: they were read as true)
+Flag = Annotated[bool, Strict()]
 # Strict: YAML reads `yes`/`on` as true, and a lax int would take true (and "1") as 1.
 Integer = Annotated[int, Strict()]
 
