@@ -188,7 +188,8 @@ BuildTimeoutOption = Annotated[Optional[float], typer.Option(
 
 @command()
 def validate(
-    files: Annotated[list[Path], typer.Argument(help="spec files")],
+    # (readable=False: an unreadable file is a located error of its own, exit 1, not a usage error)
+    files: Annotated[list[Path], typer.Argument(help="spec files", readable=False)],
     as_json: Annotated[bool, typer.Option("--json", help="machine-readable output: a list, one report per file")]
     = False,
     check: Annotated[bool, typer.Option("--check", help="also compile every formulation and report QP sizes")] = False,
@@ -196,6 +197,8 @@ def validate(
 ) -> None:
     """Check spec files and summarize them; exit 1 if any has an error."""
     from .spec import load_spec
+
+    _end_like_a_filter_on_a_closed_pipe()
 
     results, failed = [], False
     for file in files:
@@ -268,7 +271,7 @@ def _is_our_schema(path: Path, schema_id: str) -> bool:
 
 @command()
 def simulate(
-    file: Annotated[Path, typer.Argument(help="spec file with a `scenario` section")],
+    file: Annotated[Path, typer.Argument(help="spec file with a `scenario` section", readable=False)],
     out: Annotated[Optional[Path], typer.Option("--out", "-o", parser=_path, metavar="PATH", help=_out_help("simulate"))] = None,
     runtime: RuntimeOption = "c",
     formulation: FormulationOption = None,
@@ -295,7 +298,7 @@ def simulate(
 
 @command()
 def compare(
-    file: Annotated[Path, typer.Argument(help="spec file with a `scenario` section")],
+    file: Annotated[Path, typer.Argument(help="spec file with a `scenario` section", readable=False)],
     formulations: Annotated[str, typer.Option(
         callback=_formulation_list, help=f"comma-separated formulations to run, from {', '.join(FORMULATIONS)}")] = "dcts,osc,qp_md",
     out: Annotated[Optional[Path], typer.Option("--out", "-o", parser=_path, metavar="PATH", help=_out_help("compare"))] = None,
@@ -317,7 +320,7 @@ def compare(
 
 @command()
 def sweep(
-    file: Annotated[Path, typer.Argument(help="spec file")],
+    file: Annotated[Path, typer.Argument(help="spec file", readable=False)],
     campaign: Annotated[Path, typer.Option("--campaign", "-c", help="campaign file: what is drawn or gridded, "
                                            "how many samples, the seed (see docs/sweep.md)")],
     out: Annotated[Path, typer.Option("--out", "-o", parser=_path, metavar="PATH", help="output folder; running the same command again resumes "
@@ -351,7 +354,7 @@ def sweep(
 
 @command("compile")
 def compile_(
-    file: Annotated[Path, typer.Argument(help="spec file")],
+    file: Annotated[Path, typer.Argument(help="spec file", readable=False)],
     out: Annotated[Optional[Path], typer.Option("--out", "-o", parser=_path, metavar="PATH", help=_out_help("compile"))] = None,
     output: OldOutput = None,
     formulation: FormulationOption = None,
@@ -382,7 +385,7 @@ def compile_(
 
 @command()
 def bench(
-    file: Annotated[Path, typer.Argument(help="spec file")],
+    file: Annotated[Path, typer.Argument(help="spec file", readable=False)],
     as_json: JsonOption = False,
     formulation: FormulationOption = None,
     states: Annotated[int, typer.Option(min=1, help="states timed in C (per state set)")] = 10000,
@@ -434,6 +437,7 @@ def describe(
                                           "argument, SI units")] = False,
 ) -> None:
     """A robot's joints with position, velocity and torque limits, its frames, and its links with masses."""
+    _end_like_a_filter_on_a_closed_pipe()
     from .robot.describe import DescribeError
     from .robot.describe import describe as describe_robot
 
@@ -472,6 +476,13 @@ def init(
         typer.echo(f"error: {error}", err=True)
         raise typer.Exit(1) from None
     typer.echo(f"wrote {file} (spec {name!r}, robot {robot}); next: dcts validate {file}, dcts simulate {file}")
+
+
+def _end_like_a_filter_on_a_closed_pipe() -> None:
+    """For a command that only prints: a reader that stops early (`dcts validate a.yaml b.yaml | head -1`)
+    ends it as it ends `cat` (SIGPIPE, 141 in the shell). Click's handling exited 1, "a bad spec", for
+    valid specs (found from outside). Not for the commands that write a folder: they finish it."""
+    signal.signal(signal.SIGPIPE, signal.SIG_DFL)
 
 
 def _exit_on_sigterm(signum: int, _frame) -> None:

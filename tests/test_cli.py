@@ -154,6 +154,53 @@ def test_validate_json_is_a_list_for_one_file() -> None:
     assert isinstance(reports, list) and [r["name"] for r in reports] == ["minimal"]
 
 
+def test_an_unreadable_spec_is_a_report_of_its_own_not_a_usage_error(tmp_path: Path, monkeypatch) -> None:
+    """An unreadable spec among others was Click's usage error (exit 2, no JSON, the other reports
+    lost; found from outside). The command no longer checks readability itself: the spec loader
+    says why it cannot read the file. (As root every file is readable: a refused open stands in.)"""
+    import os
+
+    unreadable = tmp_path / "locked.yaml"
+    unreadable.write_text(MINIMAL.read_text())
+    monkeypatch.setattr(os, "access", lambda path, mode, **_: Path(path) != unreadable)
+    real_open = Path.open
+
+    def refusing_open(self, *args, **kwargs):
+        if self == unreadable:
+            raise PermissionError(13, "Permission denied")
+        return real_open(self, *args, **kwargs)
+
+    monkeypatch.setattr(Path, "open", refusing_open)
+    result = invoke("validate", "--json", str(MINIMAL), str(unreadable))
+    assert result.exit_code == 1, result.output
+    reports = json.loads(result.stdout)
+    assert [r["valid"] for r in reports] == [True, False]
+    assert reports[1]["diagnostics"][0]["message"] == "cannot read the file: Permission denied"
+
+
+@pytest.mark.parametrize("command", [("validate", str(MINIMAL), str(MINIMAL), str(MINIMAL)), ("describe", "iiwa14")])
+def test_a_printing_command_ends_like_a_filter_when_its_reader_stops(command) -> None:
+    """`dcts validate a.yaml b.yaml | head -1` exited 1, "a bad spec", for valid specs: Click's
+    answer to the closed pipe (found from outside). It ends as `cat` does, by SIGPIPE."""
+    import signal
+    import sys
+
+    script = Path(sys.executable).with_name("dcts")
+    process = subprocess.Popen([str(script), *command], stdout=subprocess.PIPE, stderr=subprocess.DEVNULL)
+    process.stdout.close()  # (the reader gone before the first line)
+    assert process.wait(timeout=120) == -signal.SIGPIPE
+
+
+def test_a_named_pipe_is_refused_not_waited_on(tmp_path: Path) -> None:
+    """`dcts validate` on a named pipe waited forever for a writer (found from outside)."""
+    import os
+
+    pipe = tmp_path / "spec.yaml"
+    os.mkfifo(pipe)
+    result = invoke("validate", str(pipe))
+    assert result.exit_code == 1 and "a named pipe, not a file" in result.output, result.output
+
+
 def test_schema_out_and_its_old_spelling(tmp_path: Path) -> None:
     for option in ("-o", "--out", "--output"):
         path = tmp_path / f"schema{option}.json"

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+import stat
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -136,9 +138,28 @@ def read_yaml(text: str, file: str, document: tuple[str, tuple[str, ...]] = SPEC
     return data, source
 
 
+def _named_pipe(path: Path) -> bool:
+    """Is `path` a named pipe other than this process's standard input (`/dev/stdin` of a pipeline
+    is read as it flows)? Opening one waits for a writer: `dcts validate` hung (found from outside)."""
+    try:
+        status = path.stat()
+    except OSError:
+        return False
+    if not stat.S_ISFIFO(status.st_mode):
+        return False
+    try:
+        own = os.fstat(0)
+    except OSError:
+        return True
+    return (own.st_dev, own.st_ino) != (status.st_dev, status.st_ino)
+
+
 def read_yaml_file(path: str | Path, document: tuple[str, tuple[str, ...]] = SPEC_DOCUMENT) -> tuple[Any, SourceMap]:
     """Read a YAML file of at most MAX_BYTES; a missing, unreadable or too big file is a located diagnostic too."""
     path = Path(path)
+    if _named_pipe(path):
+        raise SpecError([Diagnostic("a named pipe, not a file: reading it waits for a writer that may never come; "
+                                    "give the YAML file itself", "error", str(path))])
     try:
         with path.open("rb") as stream:
             raw = stream.read(MAX_BYTES + 1)
