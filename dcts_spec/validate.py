@@ -13,7 +13,7 @@ from .formulations import build_problem
 from .formulations.hierarchy import OverConstrainedLevel, level_structure
 from .limits.naming import bound_text, joint_force_unit
 from .robot.model import Robot
-from .robot.resolve import frame_candidates, resolve_robot
+from .robot.resolve import frame_candidates, locked_joints, resolve_robot
 from .spec import Diagnostic, Spec, SpecError, check_structure, load_spec
 from .spec.errors import did_you_mean
 from .spec.scenario import run_steps_problem
@@ -267,6 +267,7 @@ def _check_tasks(spec: Spec, robot: Robot) -> list[Diagnostic]:
     src, diags = spec.source, []
     seen: dict[str, int] = {}
     frames = [f.name for f in robot.model.frames]
+    locked = locked_joints(spec)
     for i, task in enumerate(spec.tasks):
         at = ("tasks", i)
         # (names compared in upper case: the generated header's macros spell them so, <NAME>_REF_<TASK>_…)
@@ -280,11 +281,16 @@ def _check_tasks(spec: Spec, robot: Robot) -> list[Diagnostic]:
         seen.setdefault(task.name.upper(), i)
         if task.frame is not None and not robot.has_frame(task.frame):
             diags.append(src.diagnostic(at + ("frame",), f"no frame {task.frame!r} in the robot{frame_candidates(task.frame, frames, spec)}"))
+        elif task.frame is not None and robot.fixed_to_world(task.frame):
+            diags.append(src.diagnostic(at + ("frame",), f"frame {task.frame!r} is fixed to the world (no joint moves "
+                                                         "it): a task on it can do nothing; name a frame the joints move"))
+            continue
         if task.type != "joint":
             continue
         unknown = [j for j in task_joints(task, robot) if j not in robot.joint_names]
         for j in unknown:
             why = (" (it is locked in robot.locked_joints: a task cannot move it)" if j in spec.robot.locked_joints
+                   else f" (the built-in {spec.robot.model} locks it: a task cannot move it)" if j in locked
                    else did_you_mean(j, robot.joint_names, 3))
             diags.append(src.diagnostic(at + ("joints",), f"no joint {j!r}{why}; joints: {', '.join(robot.joint_names)}"))
         if unknown:
@@ -396,10 +402,20 @@ def _check_scenario(spec: Spec, robot: Robot) -> list[Diagnostic]:
             prismatic = robot.prismatic
             unit = ["m" if p else sc.unit for p in prismatic]
             scale = np.where(prismatic, 1.0, 180.0 / np.pi if sc.unit == "deg" else 1.0)
-            where = "; ".join(f"joint {j + 1} ({robot.joint_names[j]}) at {q0[j] * scale[j]:.4g}, limits "
-                              f"[{robot.limits.q_min[j] * scale[j]:.4g}, {robot.limits.q_max[j] * scale[j]:.4g}] "
-                              f"{unit[j]}" for j in outside)
+            beyond = np.maximum(robot.limits.q_min - q0, q0 - robot.limits.q_max) * scale
+            where = "; ".join(f"joint {j + 1} ({robot.joint_names[j]}) at {q0[j] * scale[j]:.4g}, {beyond[j]:.3g} "
+                              f"{unit[j]} beyond its limits [{robot.limits.q_min[j] * scale[j]:.4g}, "
+                              f"{robot.limits.q_max[j] * scale[j]:.4g}] {unit[j]}" for j in outside)
             diags.append(src.diagnostic(at + ("initial_q",), f"joints start outside their position limits: {where}"))
+    if sc.initial_dq is not None and len(sc.initial_dq) == n:
+        dq0 = np.abs(joint_to_si(list(sc.initial_dq), sc.unit, robot.prismatic))
+        fast = np.flatnonzero(dq0 > robot.limits.v_max)
+        if fast.size:
+            where = ", ".join(f"joint {j + 1} ({robot.joint_names[j]}) at {dq0[j] / robot.limits.v_max[j]:.3g} × its "
+                              "limit" for j in fast)
+            diags.append(src.diagnostic(at + ("initial_dq",), f"joints start beyond their velocity limits: {where} (the "
+                                        "first steps are relaxed ones, braking as hard as the torque limits allow)",
+                                        "warning"))
     frames = [f.name for f in robot.model.frames]
     for i, d in enumerate(sc.disturbances):
         where = at + ("disturbances", i)
@@ -410,9 +426,14 @@ def _check_scenario(spec: Spec, robot: Robot) -> list[Diagnostic]:
             if robot.fixed_to_world(d.body):
                 diags.append(src.diagnostic(where + ("body",), f"{d.body} is fixed to the world: the robot does not feel "
                                             "this push", "warning"))
+            if not any(d.force) and not any(d.torque):
+                diags.append(src.diagnostic(where, "neither force nor torque: this push does nothing", "warning"))
             diags += _push_sampling(spec, d, where)
         elif len(d.torque) != n:
             diags.append(src.diagnostic(where + ("torque",), f"{len(d.torque)} values for {n} joints"))
+        elif 2 * d.ramp > d.duration:
+            diags.append(src.diagnostic(where + ("ramp",), f"a rise and a fall of {d.ramp:g} s each in a duration of "
+                                        f"{d.duration:g} s (ramps included): it never reaches its full torque", "warning"))
     late = [(("disturbances", i, "start"), "this push starts", d.start) for i, d in enumerate(sc.disturbances)]
     late += [(("parameters", i, "time"), "this parameter change comes", c.time) for i, c in enumerate(sc.parameters)]
     for where, what, time in late:

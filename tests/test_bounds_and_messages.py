@@ -44,7 +44,7 @@ def test_a_target_beyond_a_bound_is_a_warning_with_numbers():
 
 
 def test_initial_q_outside_its_limits_names_values_and_limits():
-    with pytest.raises(SpecError, match=r"joint 2 \(joint2\) at 130, limits \[-120, 120\] deg"):
+    with pytest.raises(SpecError, match=r"joint 2 \(joint2\) at 130, 10 deg beyond its limits \[-120, 120\] deg"):
         validate_spec(load_spec_text(_spec("{frame: tool, axis: z, min: 0.1}", initial="[0, 130, 0, -60, 0, 60, 0]")))
 
 
