@@ -108,6 +108,8 @@ class TaskSpec(StrictModel):
     @model_validator(mode="after")
     def _consistent(self) -> "TaskSpec":
         cartesian = self.type != "joint"
+        if cartesian and self.frame is None and "frame" in self.model_fields_set:  # (`frame:` left empty)
+            raise FieldError("frame", f"an empty value: a {self.type} task needs the name of a frame")
         if cartesian and self.frame is None:
             raise FieldError("type", f"a {self.type} task needs `frame`")
         if not cartesian and self.frame is not None:
