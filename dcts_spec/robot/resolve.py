@@ -39,7 +39,6 @@ def resolve_robot(spec: Spec) -> tuple[Robot, list[Diagnostic]]:
     model, urdf_path = _load_model(spec, diags)
     if model is None:
         raise SpecError(diags)
-    _check_joint_types(model, src, diags)
     _check_inertias(spec, model, diags)
     _check_moved_inertia(spec, model, diags)
     _add_frames(spec, model, diags)
@@ -228,19 +227,6 @@ def captured_stderr() -> Iterator[list[str]]:
         os.close(saved)
 
 
-def _check_joint_types(model: pin.Model, src: SourceMap, diags: list[Diagnostic]) -> None:
-    for jid in range(1, model.njoints):
-        joint = model.joints[jid]
-        if joint.nq != 1 or joint.nv != 1:
-            diags.append(
-                src.diagnostic(
-                    ("robot",),
-                    f"joint {model.names[jid]!r} is a {joint.shortname()} (nq={joint.nq}); only revolute and "
-                    "prismatic joints are supported — lock it with robot.locked_joints",
-                )
-            )
-
-
 # kg·m²: a principal moment this close to 0 is rounding (iCub's URDF writes ixx = -5.4e-20 for a
 # link with no rotational inertia), not an inertia that is not positive definite
 INERTIA_ROUNDING = 1e-12
@@ -288,9 +274,7 @@ def _check_moved_inertia(spec: Spec, model: pin.Model, diags: list[Diagnostic]) 
     """Every joint must move some inertia: a joint whose links, and every link beyond it, have no
     mass (massless fingers in some URDFs) makes the mass matrix singular, and no dynamics-based
     controller exists for it (M(q)'s diagonal entry is that inertia about the joint's axis)."""
-    if any(joint.nv != 1 for joint in model.joints[1:]):
-        return  # (reported by _check_joint_types)
-    data = model.createData()
+    data = model.createData()  # (every joint has one coordinate: _load_model refused the others)
     diagonal = np.diag(pin.crba(model, data, pin.neutral(model))) + model.armature
     empty = diagonal <= MOVED_INERTIA * max(1.0, float(diagonal.max()))
     if empty.any():
