@@ -291,6 +291,8 @@ def test_a_urdf_joint_without_its_limits_is_named(tmp_path, limit, severity, wor
      "2 links have no parent joint (base, stray)"),
     (lambda urdf: urdf.replace('name="shoulder" type="revolute"', 'name="shoulder" type="floating"'),
      "joint shoulder is a floating joint (6 DOF): dcts drives fixed-base robots"),
+    (lambda urdf: urdf.replace('<mass value="2.0"/>', '<mass value="1e30"/>'),
+     "the URDF's masses span too many orders of magnitude to be computed with (the link moved by shoulder has 1e+30 kg)"),
 ])
 def test_a_file_that_is_no_urdf_or_no_tree_says_so(tmp_path, edit, words):
     """An SDF (example-robot-data's Cassie) was refused for a joint's missing <limit>, and a link with

@@ -276,7 +276,18 @@ def _check_moved_inertia(spec: Spec, model: pin.Model, diags: list[Diagnostic]) 
     controller exists for it (M(q)'s diagonal entry is that inertia about the joint's axis)."""
     data = model.createData()  # (every joint has one coordinate: _load_model refused the others)
     diagonal = np.diag(pin.crba(model, data, pin.neutral(model))) + model.armature
-    empty = diagonal <= MOVED_INERTIA * max(1.0, float(diagonal.max()))
+    largest = float(diagonal.max())
+    empty = diagonal <= MOVED_INERTIA * max(1.0, largest)
+    carried = _subtree_masses(model)
+    dwarfed = [j for j in range(1, model.njoints) if empty[model.joints[j].idx_v] and carried[j] > 0.0]
+    if dwarfed:  # (links with mass, beside one of a mass that makes theirs rounding: 1e30 kg, found from outside)
+        heaviest = max(range(1, model.njoints), key=lambda j: model.inertias[j].mass)
+        names = ", ".join(model.names[j] for j in dwarfed)
+        diags.append(spec.source.diagnostic(_robot_key(spec), (
+            f"the inertia that {names} move{'s' if len(dwarfed) == 1 else ''} is below {MOVED_INERTIA:g} of the largest "
+            f"joint's ({largest:.3g}): the URDF's masses span too many orders of magnitude to be computed with "
+            f"(the link moved by {model.names[heaviest]} has {model.inertias[heaviest].mass:.3g} kg); correct its masses")))
+        empty[[model.joints[j].idx_v for j in dwarfed]] = False
     if empty.any():
         names = [model.names[j] for j in range(1, model.njoints) if empty[model.joints[j].idx_v]]
         joints, them = (f"joints {', '.join(names)} move", "them") if len(names) > 1 else (f"joint {names[0]} moves", "it")
@@ -284,6 +295,14 @@ def _check_moved_inertia(spec: Spec, model: pin.Model, diags: list[Diagnostic]) 
             _robot_key(spec), f"{joints} no mass or inertia (every link beyond {them} is massless in the URDF), so the "
                    f"mass matrix is singular and no torque controller exists: lock {them} with "
                    f"robot.locked_joints, or give those links inertia"))
+
+
+def _subtree_masses(model: pin.Model) -> list[float]:
+    """The mass each joint moves: its child link's and every link's beyond it (kg)."""
+    mass = [model.inertias[j].mass for j in range(model.njoints)]
+    for j in range(model.njoints - 1, 0, -1):  # (a parent's index is below its children's)
+        mass[model.parents[j]] += mass[j]
+    return mass
 
 
 def _add_frames(spec: Spec, model: pin.Model, diags: list[Diagnostic]) -> None:
