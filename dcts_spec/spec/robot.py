@@ -60,7 +60,8 @@ class RobotSpec(StrictModel):
                                                 "are driven as revolute joints without position limits (one angle each)"),
                              examples=["robots/my_arm.urdf"])
     frames: dict[str, FrameSpec] = Field(
-        default_factory=dict, description="extra frames by name (tool tips, cameras), usable wherever a frame is named",
+        default_factory=dict, description=("extra frames by name (tool tips, cameras; names as task names: letters, digits, "
+                                           "_), usable wherever a frame is named; a parent may be another of them"),
         examples=[{"camera": {"parent": "link7", "xyz": [0, 0.05, 0.08]}}])
     locked_joints: dict[str, Annotated[Number, JOINT_VALUE]] = Field(
         default_factory=dict, description="joints fixed at a value (rad, or m for a prismatic joint), e.g. gripper fingers",
