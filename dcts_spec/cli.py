@@ -35,7 +35,8 @@ EPILOG = ("Outputs: every command that writes a folder takes -o/--out DIR; witho
           "build/<name>, simulate runs/<name> and compare runs/<name>-compare (<name>: the spec's `name`). "
           "dcts writes only into a folder that is empty or that the same command wrote, and replaces only its own files. "
           "Exit codes: 0 ok, 1 a bad spec or input (the message says where), 2 a usage error (unknown option, "
-          "bad option value), 3 an internal error (a bug: DCTS_DEBUG=1 shows the traceback).")
+          "bad option value), 3 an internal error (a bug: DCTS_DEBUG=1 shows the traceback); validate and describe end "
+          "by SIGPIPE (141 in the shell) when their reader stops early, as cat does.")
 INTERNAL_ERROR = 3
 
 
