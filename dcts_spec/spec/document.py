@@ -14,7 +14,7 @@ from .robot import RobotSpec
 from .scenario import ScenarioSpec
 from .source import SourceMap
 from .tasks import TaskSpec
-from .types import StrictModel
+from .types import IDENTIFIER, StrictModel
 
 
 def _not_a_boolean(value: Any) -> Any:
@@ -65,7 +65,7 @@ class Spec(StrictModel):
 
     version: Annotated[Literal[1], BeforeValidator(_not_a_boolean)] = Field(description="spec language version; 1 is the only one", examples=[1])
     name: Annotated[str, AfterValidator(_not_a_shadowing_name)] = Field(
-        pattern=r"^[A-Za-z_][A-Za-z0-9_]*$",
+        pattern=IDENTIFIER,
         max_length=64,
         description="identifier (letters, digits, _; at most 64 characters); prefixes the generated C symbols "
         "and names the output folders",

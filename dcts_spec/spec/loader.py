@@ -14,7 +14,7 @@ from pydantic import BaseModel, ValidationError
 from .document import Spec
 from .errors import Diagnostic, KeyPath, SpecError, did_you_mean, shown
 from .source import SourceMap, read_yaml, read_yaml_file
-from .types import FieldError
+from .types import IDENTIFIER_RULE, FieldError
 
 Document = typing.TypeVar("Document", bound=BaseModel)
 
@@ -172,7 +172,7 @@ def _message(error: dict, path: KeyPath, rest: tuple, data: Any, root: type[Base
     if kind in ("list_type", "tuple_type"):
         return f"expected a list, got {_describe(error['input'])}"
     if kind == "string_pattern_mismatch":
-        return f"{shown(error['input'])} is not an identifier (letters, digits and _, not starting with a digit)"
+        return f"{shown(error['input'])} is not an identifier ({IDENTIFIER_RULE})"
     if kind == "string_too_long":
         return f"at most {error['ctx']['max_length']} characters, got {len(error['input'])}"
     if kind in ("bool_type", "bool_parsing"):

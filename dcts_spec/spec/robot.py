@@ -7,11 +7,10 @@ from typing import Annotated, Literal
 
 from pydantic import Field, field_validator, model_validator
 
-from .types import JOINT_VALUE, LENGTH, Number, Range, StrictModel, Vec3
+from .types import IDENTIFIER, IDENTIFIER_RULE, JOINT_VALUE, LENGTH, Number, Range, StrictModel, Vec3
 from .units import AngleUnit
 
 
-_IDENTIFIER = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
 _NAME_MAX, _PATH_MAX = 255, 4096  # Linux's NAME_MAX and PATH_MAX, the smallest usual limits
 # (also the range a campaign's draws of a scenario payload's mass are held to: campaign/document.py)
 PAYLOAD_MASS = Range(0, 1e4, "kg", open=True)
@@ -95,9 +94,8 @@ class RobotSpec(StrictModel):
         run-time parameter names), where `*/` ended a comment and broke the build (found from
         outside)."""
         for name in frames:
-            if not _IDENTIFIER.fullmatch(name):
-                raise ValueError(f"frame name {name!r} is not an identifier (letters, digits and _, not starting "
-                                 "with a digit)")
+            if not re.fullmatch(IDENTIFIER, name):
+                raise ValueError(f"frame name {name!r} is not an identifier ({IDENTIFIER_RULE})")
         return frames
 
     @model_validator(mode="after")

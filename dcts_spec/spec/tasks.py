@@ -6,7 +6,7 @@ from typing import Annotated, Literal
 
 from pydantic import Field, model_validator
 
-from .types import JOINT_VALUE, LENGTH, FieldError, Flag, Integer, Number, NumberList, Range, ScalarOrVector, StrictModel, Vec3, size_of
+from .types import IDENTIFIER, JOINT_VALUE, LENGTH, FieldError, Flag, Integer, Number, NumberList, Range, ScalarOrVector, StrictModel, Vec3, size_of
 from .units import AngleUnit
 
 TaskType = Literal["position", "orientation", "pose", "joint"]
@@ -87,7 +87,7 @@ class Reference(StrictModel):
 class TaskSpec(StrictModel):
     """One task: a frame's position and/or orientation, or joint positions, with PD gains and a priority."""
 
-    name: str = Field(pattern=r"^[A-Za-z_][A-Za-z0-9_]*$", description="identifier (letters, digits, _), unique "
+    name: str = Field(pattern=IDENTIFIER, description="identifier (letters, digits, _), unique "
                       "in the spec", examples=["tool_position", "posture"])
     type: TaskType = Field(description="position (3 translation axes), orientation (3 rotation axes), pose (both) "
                            "or joint (joint positions)", examples=["position", "joint"])

@@ -74,6 +74,9 @@ _LIST_SCHEMA = {"type": "array", "items": _NUMBER_SCHEMA, "minItems": 1}
 # A native (strict, finite) float rather than a PlainValidator: a plain validator replaces the core schema,
 # and pydantic then silently drops field constraints such as `Field(gt=0)` (in validation and JSON Schema).
 Number = Annotated[float, Strict(), AllowInfNan(False)]
+# The names that go into the generated C (the spec's, its tasks', the frames it adds)
+IDENTIFIER = r"^[A-Za-z_][A-Za-z0-9_]*$"
+IDENTIFIER_RULE = "letters, digits and _, not starting with a digit"
 # Strict too: a quoted 'true' or 'yes' is text, refused as `kp: '100'` is (found from outside: they were read as true)
 Flag = Annotated[bool, Strict()]
 # Strict: YAML reads `yes`/`on` as true, and a lax int would take true (and "1") as 1.
