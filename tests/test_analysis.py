@@ -252,11 +252,28 @@ def test_a_run_folder_from_before_the_owned_list_is_still_written(tmp_path: Path
     must still run into it; a user's file there stays."""
     out = tmp_path / "run"
     out.mkdir()
-    (out / "summary.json").write_text("{}")
+    (out / "summary.json").write_text('{"spec": "minimal", "formulation": "dcts", "runtime": "c", "steps": 10}')
     (out / "mine.txt").write_text("keep")
     with atomic_directory(out, "run") as staging:
         (staging / "summary.json").write_text('{"new": 1}')
     assert (out / "summary.json").read_text() == '{"new": 1}' and (out / "mine.txt").read_text() == "keep"
+
+
+@pytest.mark.parametrize("name, text", [("summary.json", '{"my": "results"}'), ("summary.json", "not json"),
+                                        ("comparison.json", '{"a": {"spec": "x"}}'), ("comparison.json", "{}")])
+def test_a_users_summary_in_a_folder_dcts_did_not_write_is_not_taken_for_an_older_run(tmp_path: Path, name,
+                                                                                      text) -> None:
+    """A folder with no OWNED file whose summary.json (comparison.json) is not a dcts run's: the
+    user's, refused before any work and left as it was (found from outside: `dcts simulate -o`
+    replaced the user's summary.json and log.npz there)."""
+    out = tmp_path / "results"
+    out.mkdir()
+    (out / name).write_text(text)
+    (out / "log.npz").write_text("mine")
+    with pytest.raises(OutputFolderError, match="not written by dcts"):
+        with atomic_directory(out, "run") as staging:
+            (staging / name).write_text("dcts")
+    assert (out / name).read_text() == text and sorted(p.name for p in out.iterdir()) == sorted([name, "log.npz"])
 
 
 def _summary(case, **changes):

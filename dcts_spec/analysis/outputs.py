@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import secrets
 import shutil
 from collections.abc import Iterator
@@ -13,9 +14,27 @@ from .plots import write_plots
 from .run import RunResult
 
 
+# What every run's summary.json has held since the first dcts (a comparison.json holds one per run)
+_SUMMARY_KEYS = ("spec", "formulation", "runtime")
+
+
+def _is_summary(value: object) -> bool:
+    return isinstance(value, dict) and all(key in value for key in _SUMMARY_KEYS)
+
+
 def earlier_output(folder: Path) -> bool:
-    """A run or comparison folder written by a dcts from before the OWNED file."""
-    return (folder / "summary.json").is_file() or (folder / "comparison.json").is_file()
+    """A run or comparison folder written by a dcts from before the OWNED file: known by its
+    summary.json (or comparison.json) as dcts writes it, not by the name alone (a user's own
+    summary.json there was replaced)."""
+    try:
+        if (folder / "summary.json").is_file():
+            return _is_summary(json.loads((folder / "summary.json").read_text()))
+        if (folder / "comparison.json").is_file():
+            table = json.loads((folder / "comparison.json").read_text())
+            return isinstance(table, dict) and bool(table) and all(_is_summary(v) for v in table.values())
+    except (OSError, ValueError):
+        pass
+    return False
 
 
 @contextmanager
