@@ -582,6 +582,26 @@ def test_an_interrupted_optimization_resumes_with_new_values(spec_file, tmp_path
     assert optuna.trial.TrialState.RUNNING not in states
 
 
+def test_optimize_tunes_the_varying_components_of_a_reference(tmp_path) -> None:
+    """A parameter of several components (a position) with a range or a set per component: each
+    varying component is a dimension of the search, the fixed ones stay (it was refused: "give one
+    range for all its components")."""
+    spec = tmp_path / "reference.yaml"
+    spec.write_text(MINIMAL.read_text().replace("name: minimal", "name: sweep_reference").replace(
+        "duration: 2.0", "duration: 0.1") + "parameters:\n  tasks: {tool_position: [reference]}\n")
+    campaign_file = tmp_path / "campaign.yaml"
+    campaign_file.write_text("version: 1\nsamples: 1\nseed: 3\nduration: 0.1\ncontroller:\n  parameters:\n"
+                             "    tool_position.position: [0.5, {uniform: [-0.1, 0.1]}, {choice: [0.55, 0.6]}]\n")
+    out, options = tmp_path / "out", SweepOptions(engine="serial", progress=False, plots=False)
+    record = tune(spec, campaign_file, out, "primary_rms_error", "worst", trials=3, options=options).report["optimize"]
+    positions = [t["values"]["tool_position.position"] for t in record["history"]]
+    assert len(positions) == 3 and all(p[0] == 0.5 and -0.1 <= p[1] <= 0.1 and p[2] in (0.55, 0.6) for p in positions)
+    assert len({p[1] for p in positions}) == 3  # (drawn, not the first value again)
+    best = record["best"]["values"]["tool_position.position"]
+    [row] = _rows(out).values()  # the campaign's row ran with the best trial's position
+    assert [row[f"controller.parameters.tool_position.position[{j}]"] for j in range(3)] == best
+
+
 def test_an_optimization_refused_leaves_no_folder(spec_file, tmp_path) -> None:
     campaign_file = tmp_path / "campaign.yaml"
     campaign_file.write_text(CAMPAIGN.split("controller:")[0] + "report:" + CAMPAIGN.split("report:")[1])

@@ -20,26 +20,33 @@ from ..spec.errors import SpecError
 from .document import Distribution
 from .report import LOWER_IS_WORSE
 from .results import JOURNAL, TRIALS
+from .sampling import parameter_columns
 from .sweep import CampaignSession, SweepOptions, SweepResult, campaign_session
 
 
-def search_space(session: CampaignSession) -> dict[str, Distribution | list[str]]:
-    """Parameter name (or `formulation`) to its range: the campaign's controller values that
-    vary (a range or a set; a normal distribution has no range and is refused at its line)."""
+# A search space: parameter name (or `formulation`) to its range, or to its components' (a
+# parameter of several components, e.g. a position: the fixed ones as given, each varying one a
+# dimension of the search of its own, `name[i]`)
+Space = dict[str, Distribution | list[Distribution] | list[str]]
+
+
+def search_space(session: CampaignSession) -> Space:
+    """The campaign's controller values that vary (a range or a set; a normal distribution has no
+    range and is refused at its line)."""
     controller = session.campaign.controller
-    space: dict[str, Distribution | list[str]] = {}
+    space: Space = {}
     src = session.campaign.source
     if controller is None:
         raise SpecError([src.diagnostic((), "--optimize needs controller values to tune: a `controller:` section "
                                          "with `parameters` (or several formulations)")])
     for name, value in controller.parameters.items():
-        if isinstance(value, list):
-            raise SpecError([src.diagnostic(("controller", "parameters", name), "--optimize tunes one value per "
-                                            "parameter: give one range for all its components")])
-        if value.kind == "normal":
-            raise SpecError([src.diagnostic(("controller", "parameters", name), "--optimize needs a range "
-                                            "(uniform, loguniform) or a set (choice, grid), not normal")])
-        if value.kind != "fixed":
+        components = value if isinstance(value, list) else [value]
+        for i, component in enumerate(components):
+            if component.kind == "normal":
+                where = ("controller", "parameters", name, *((i,) if isinstance(value, list) else ()))
+                raise SpecError([src.diagnostic(where, "--optimize needs a range (uniform, loguniform) or a set "
+                                                "(choice, grid), not normal")])
+        if any(component.kind != "fixed" for component in components):
             space[name] = value
     formulations = session.driver.sampler.formulations
     if len(formulations) > 1:
@@ -73,16 +80,32 @@ def optimize(session: CampaignSession, metric: str, objective: str, trials: int)
     finished = sum(t.state == state.COMPLETE for t in study.trials)
     for _ in range(max(0, trials - finished)):
         trial = study.ask()
-        values = {name: _suggest(trial, name, d) for name, d in space.items()}
+        values = _suggest_all(trial, space)
         rows = session.run(indices, values)
         score = _objective(rows, metric, objective, direction)
         study.tell(trial, score)
         _append(folder / TRIALS, {"trial": trial.number, "values": values, objective: score})
     best = study.best_trial
-    history = [{"trial": t.number, "values": t.params, "value": t.value} for t in study.trials
+
+    def values_of(t: Any) -> dict[str, Any]:  # (a finished trial's suggestions, as the samples ran them)
+        return _suggest_all(optuna.trial.FixedTrial(t.params), space)
+
+    history = [{"trial": t.number, "values": values_of(t), "value": t.value} for t in study.trials
                if t.state == state.COMPLETE]
     return {"metric": metric, "objective": objective, "direction": direction, "trials": len(history),
-            "best": {"trial": best.number, "values": best.params, "value": best.value}, "history": history}
+            "best": {"trial": best.number, "values": values_of(best), "value": best.value}, "history": history}
+
+
+def _suggest_all(trial: Any, space: Space) -> dict[str, Any]:
+    """The trial's controller values: a parameter's components a list (fixed ones as given)."""
+    values: dict[str, Any] = {}
+    for name, d in space.items():
+        if isinstance(d, list) and d and isinstance(d[0], Distribution):
+            values[name] = [c.fixed if c.kind == "fixed" else _suggest(trial, f"{name}[{i}]", c)
+                            for i, c in enumerate(d)]
+        else:
+            values[name] = _suggest(trial, name, d)
+    return values
 
 
 def _suggest(trial: Any, name: str, d: Distribution | list[str]) -> Any:
@@ -108,7 +131,8 @@ def _objective(rows: list[dict[str, Any]], metric: str, objective: str, directio
 
 def _ran_with(row: dict[str, Any], values: dict[str, Any]) -> bool:
     """Whether a campaign row ran with these controller values."""
-    return all(row.get("formulation" if name == "formulation" else f"controller.parameters.{name}") == value
+    return all(row.get("formulation") == value if name == "formulation"
+               else all(row.get(column) == v for column, v in parameter_columns(name, value).items())
                for name, value in values.items())
 
 

@@ -28,7 +28,7 @@ from ..spec.loader import spec_from_data
 from ..spec.source import read_yaml
 from ..validate import initial_configuration, validate_spec
 from .document import load_campaign_text
-from .sampling import Sample, Sampler
+from .sampling import Sample, Sampler, parameter_columns
 from .scenario import JointRange, sample_spec_data
 
 # Summary entries that are not one number per run (or are about the machine, not the controller).
@@ -145,6 +145,6 @@ def _with_parameters(sample: Sample, parameters: dict[str, Any]) -> Sample:
     values = dict(sample.values)
     for name, value in parameters.items():
         if name != "formulation":
-            values[f"controller.parameters.{name}"] = value
+            values |= parameter_columns(name, value)
     formulation = parameters.get("formulation", sample.formulation)
     return Sample(sample.index, sample.seed, values, formulation, sample.directions)

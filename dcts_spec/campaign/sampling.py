@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterator
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -164,6 +165,15 @@ def variables(campaign: Campaign, joints: int) -> Iterator[Variable]:
 def _vector(path: KeyPath, values: tuple[Value, ...]) -> Iterator[Variable]:
     for j, value in enumerate(values):
         yield Variable(path + ("xyz"[j],), value)
+
+
+def parameter_columns(name: str, value: Any) -> dict[str, Any]:
+    """A run-time parameter's value (a number, or a list of its components) as the sample's values
+    (and the results' columns) hold it: `controller.parameters.<name>`, or `…<name>[j]` each."""
+    path = ("controller", "parameters", name)
+    if isinstance(value, list):
+        return {format_path(path + (j,)): v for j, v in enumerate(value)}
+    return {format_path(path): value}
 
 
 def _per_joint(path: KeyPath, value: Value | list[Value], size: int) -> Iterator[Variable]:
