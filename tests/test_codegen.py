@@ -26,6 +26,7 @@ from typer.testing import CliRunner
 
 from dcts_spec.cli import app
 from dcts_spec.codegen import BundleCache, CodegenError, compile_bundle, compile_c, load_bundle, model_digest
+from dcts_spec.codegen.build import cache_root
 from dcts_spec.codegen.cache import KEY_FILE, default_cache_dir
 from dcts_spec.codegen.bundle import SPREAD_FRACTION, golden_tolerances
 from dcts_spec.codegen.spec_copy import copy_spec
@@ -876,6 +877,7 @@ def test_default_cache_dir(monkeypatch, tmp_path):
     monkeypatch.delenv("DCTS_CACHE_DIR")
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))
     assert default_cache_dir() == tmp_path / "xdg" / "dcts" / "bundles"
+    assert cache_root() == tmp_path / "xdg" / "dcts"  # (DAQP's sources and objects: the README's other cache)
     monkeypatch.delenv("XDG_CACHE_HOME")
     assert default_cache_dir() == Path.home() / ".cache" / "dcts" / "bundles"
 

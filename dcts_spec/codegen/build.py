@@ -33,7 +33,16 @@ from .bundle import DAQP_VERSION, GENERATOR, GOLDEN_COUNT, CodegenError, generat
 from .model import model_record
 from .process import Step, build_timeout as checked_timeout, run, start, tail
 
-CACHE_DIR = Path(os.environ.get("DCTS_CACHE", Path.home() / ".cache" / "dcts"))
+
+def cache_root() -> Path:
+    """`$XDG_CACHE_HOME/dcts`, else `~/.cache/dcts`: what dcts keeps between commands."""
+    xdg = os.environ.get("XDG_CACHE_HOME")
+    return (Path(xdg) if xdg and Path(xdg).is_absolute() else Path.home() / ".cache") / "dcts"
+
+
+# DAQP's C sources and objects, the bench's Pinocchio harness (built bundles: cache.default_cache_dir)
+CACHE_DIR = Path(os.environ.get("DCTS_CACHE") or cache_root()).expanduser()
+
 # What the golden-vector test prints (templates/test.c.in): its summary line and, built with
 # heap counting (the Cortex-M7 test on qemu), the heap calls of init and of the steps.
 GOLDEN_SUMMARY = "golden vectors"

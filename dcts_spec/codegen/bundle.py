@@ -610,7 +610,7 @@ def generate_sources(
         )
         init_short = "No heap: DAQP is set up inside the workspace."
         daqp_note = (f" and DAQP {DAQP_VERSION} (its C sources in daqp/; QP with {nx} variables, {na} general "
-                     f"constraints, {len(priorities)} priority levels)")
+                     f"constraints, solved as a cascade of such QPs over {levels} priority levels)")
     else:
         init_note = f" * No heap: {name}_init allocates nothing (closed-form law: no QP)."
         init_short = "No heap (closed form)."

@@ -53,7 +53,7 @@ import casadi
 
 from ..robot.model import Robot
 from ..spec import Spec, load_spec
-from .build import compile_bundle, compiler_identity
+from .build import cache_root, compile_bundle, compiler_identity
 from .bundle import DAQP_VERSION, GENERATOR, CodegenError, spec_digest, version
 from .loader import CompiledController, load_bundle
 from .model import model_digest
@@ -78,9 +78,7 @@ def default_cache_dir() -> Path:
     explicit = os.environ.get(CACHE_ENV)
     if explicit:
         return Path(explicit).expanduser()
-    xdg = os.environ.get("XDG_CACHE_HOME")
-    base = Path(xdg) if xdg and Path(xdg).is_absolute() else Path.home() / ".cache"
-    return base / "dcts" / "bundles"
+    return cache_root() / "bundles"
 
 
 # -- the key ---------------------------------------------------------------------------------------
