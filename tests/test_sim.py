@@ -19,7 +19,7 @@ from dcts_spec.cli import app
 from dcts_spec.codegen import model_digest
 from dcts_spec.codegen.bundle import spec_digest
 from dcts_spec.controller import StepResult
-from dcts_spec.files import OWNED
+from dcts_spec.files import OWNED, OutputFolderError
 from dcts_spec.robot.builtin import load_builtin_model
 from dcts_spec.sim_commands import RunOptions, simulate_command
 from dcts_spec.sim.mismatch import scaled_robot
@@ -583,6 +583,27 @@ def test_simulate_writes_a_complete_output_directory(tmp_path: Path) -> None:
     assert log["q"].shape == (200, 7) and log["position_tool"].shape == (200, 3)
     assert {"tau_ext_true", "tau_ext_measured", "error_hold", "scaling", "status"} <= set(log.files)
     assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []
+
+
+def test_simulate_from_python_runs_and_writes_what_the_command_does(tmp_path: Path) -> None:
+    """`dcts_spec.simulate` (the README's Python API): the run the command runs, its folder the
+    command's files; a folder dcts may not write is refused before the run."""
+    import dcts_spec
+
+    spec = tmp_path / "push.yaml"
+    spec.write_text(spec_text(PUSH))
+    run = dcts_spec.simulate(spec, runtime="python", duration=0.05, out=tmp_path / "out", plots=False)
+    assert run.summary["steps"] == 50 and run.log.q.shape == (50, 7)
+    assert json.loads((tmp_path / "out" / "summary.json").read_text()) == json.loads(json.dumps(run.summary))
+    assert np.array_equal(np.load(tmp_path / "out" / "log.npz")["tau"], run.log.tau)
+    again = dcts_spec.simulate(spec, runtime="python", duration=0.05)  # (no folder: nothing written)
+    assert np.array_equal(again.log.tau, run.log.tau)
+    users = tmp_path / "users"
+    users.mkdir()
+    (users / "notes.txt").write_text("mine")
+    with pytest.raises(OutputFolderError, match="not written by dcts"):
+        dcts_spec.simulate(spec, runtime="python", out=users)
+    assert [p.name for p in users.iterdir()] == ["notes.txt"]
 
 
 def test_failed_run_leaves_no_output_directory(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:

@@ -63,10 +63,12 @@ def test_version_names_the_libraries() -> None:
 
 
 def test_public_api_resolves_every_name() -> None:
-    from dcts_spec import codegen, controller, spec
+    from dcts_spec import codegen, controller, spec, validate
+    from dcts_spec.analysis import simulate
 
     homes = {"compile_c": codegen, "compiled_controller": codegen, "Controller": controller, "StepResult": controller,
-             "build_controller": controller, "Spec": spec, "SpecError": spec, "load_spec": spec}
+             "build_controller": controller, "Spec": spec, "SpecError": spec, "load_spec": spec,
+             "simulate": simulate, "validate_spec": validate}
     assert set(dcts_spec.__all__) == set(homes)
     for name, module in homes.items():
         assert getattr(dcts_spec, name) is getattr(module, name), name
