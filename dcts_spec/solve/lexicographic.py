@@ -811,19 +811,22 @@ def solve_hinted(H, f, A, lbx, ubx, lba, uba, structure: Structure, acceleration
     (steady if that is where the last one did too)."""
     cascade = Cascade(H, f, A, lbx, ubx, lba, uba, structure, acceleration_map)
     x = cascade.levels(hint)
+    relaxed = x is None and cascade.relax()
+    if relaxed:
+        x = cascade.levels(hint)
     if x is not None and cascade.crosses_dropped(x):
         # a row dropped as dependent on a held face was not constant enough (held rows nearly
         # dependent themselves amplify DAQP's tolerance: docs/formulations.md, "A held row found
-        # dependent"): once more with such rows keeping their bounds, kept if it holds them
+        # dependent"): once more with such rows keeping their bounds (after the same relaxation,
+        # where the bounds gave way), kept if it holds them
         again = Cascade(H, f, A, lbx, ubx, lba, uba, structure, acceleration_map, reopen=True)
-        y = again.levels(hint)
-        if y is not None and not again.crosses_dropped(y):
-            cascade, x = again, y
-    if x is None and cascade.relax():
-        x = cascade.levels(hint)
+        if not relaxed or again.relax():
+            y = again.levels(hint)
+            if y is not None and not again.crosses_dropped(y):
+                cascade, x = again, y
+    if x is None and relaxed:
         # (the relaxation's own point meets the widened bounds: better than no answer, if DAQP fails)
-        if x is None:
-            return cascade.relaxed_point, None
+        return cascade.relaxed_point, None
     new = None if x is None else cascade.hint(x)
     if new is not None and hint is not None and (new.first, new.bent) == (hint.first, hint.bent):
         new = Hint(new.first, new.bent, True)
