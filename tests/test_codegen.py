@@ -1461,6 +1461,25 @@ tasks:
     gains: {{kp: 10, kd: 6}}
 """
 UNSEEN_ROBOTS = {
+    # TALOS's arms and torso (16 joints), both hands' positions above the left arm's posture over
+    # its 7 joints only: the right arm's null motion is set by the least-squares level's 1e-10
+    # energy tie-break alone, and C parted from Python by 11 Nm (DAQP's leftover iterate, then its
+    # warm working set: docs/formulations.md, "The QP of the law's own H from no active row in C")
+    "talos16_arm_posture_on_a_subset": """version: 1
+name: talos16_subset
+robot:
+  urdf: {urdf}/talos_data/robots/talos_reduced.urdf
+  locked_joints: {{leg_left_1_joint: 0.610865, leg_left_2_joint: 0.0, leg_left_3_joint: -0.6975, leg_left_4_joint: 1.309, leg_left_5_joint: -0.2705, leg_left_6_joint: 0.0, leg_right_1_joint: -0.610865, leg_right_2_joint: 0.0, leg_right_3_joint: -0.6975, leg_right_4_joint: 1.309, leg_right_5_joint: -0.2705, leg_right_6_joint: 0.0, gripper_left_joint: -0.523599, gripper_right_joint: -0.523599, head_1_joint: 0.261799, head_2_joint: 0.0}}
+tasks:
+  - {{name: lpos, type: position, frame: gripper_left_base_link, priority: 1, gains: {{kp: 100, kd: 20}}, reference: {{position: [0.68111, 0.32204, 0.23475]}}}}
+  - {{name: rpos, type: position, frame: gripper_right_base_link, priority: 1, gains: {{kp: 100, kd: 20}}, reference: {{position: [0.69503, -0.34491, 0.08016]}}}}
+  - {{name: larm, type: joint, priority: 2, gains: {{kp: 10, kd: 6}},
+     joints: [arm_left_1_joint, arm_left_2_joint, arm_left_3_joint, arm_left_4_joint, arm_left_5_joint, arm_left_6_joint, arm_left_7_joint],
+     reference: {{q: [-0.59363, 1.4524, 0.21876, -1.30351, 0.47924, 0.29774, -0.02725]}}}}
+scenario:
+  duration: 0.5
+  initial_q: [0.03504, 0.24729, -0.69363, 1.3524, 0.11876, -1.40351, 0.37924, 0.19774, -0.12725, 0.65028, -1.62144, 0.1912, -1.34067, 0.19397, 0.25615, 0.13543]
+""",
     # Baxter's two hands at priorities 1 and 2 above a posture: with the top level scaled, DAQP
     # called every QP on its optimal face infeasible, and C and Python parted by up to 30 Nm
     # (Cascade._hold_face); 122 of its 126 golden states hold such a face
