@@ -654,6 +654,7 @@ def generate_sources(
         "PRIORITY_SCALING": ", ".join(str(p.scaling) for p in priorities) + (", 0" if priorities else "0"),
         "PRIORITY_BEND": ", ".join(map(str, bend_starts)),
         "SCALE_STEP": c_double(lexicographic.SCALE_STEP),
+        "SCALE_RETRY_STEPS": ", ".join(c_double(step) for step in lexicographic.SCALE_RETRY_STEPS),
         "BEND_STEP": c_double(lexicographic.BEND_STEP),
         "PROXIMAL_ITERATIONS": lexicographic.PROXIMAL_ITERATIONS,
         "RELAX_ITERATIONS": lexicographic.RELAX_ITERATIONS,

@@ -66,6 +66,14 @@ from .stage_qp import (
 # weight 1/ρ enters the Hessian: a moderate ρ keeps it well conditioned, at the price of a few
 # more steps.
 SCALE_STEP = 1e-8
+# A scaling stage whose first QP DAQP fails other than by calling it infeasible (cycling) is run
+# again at these gentler steps (a shorter first step, the same maximum): on a Kinova's 4 levels,
+# with two rows held by the level above (`_hold_face`), DAQP cycled at 1e-8, the stage counted as
+# infeasible, and the level was bent to s = 0 where s = 0.924 holds every row (the independent
+# reference's answer; found from outside, in 31 of 150 states around that one). Where DAQP calls
+# the stage infeasible, it bends as before.
+SCALE_RETRY_STEPS = (1e-6, 1e-4)
+DAQP_INFEASIBLE = -1  # DAQP's exit flag for a QP it found infeasible
 BEND_STEP = 1e-5
 MAX_EXTRAPOLATION = 1e6
 # Relative: a relaxed bound is widened this much beyond what was achieved. The stages after the
@@ -249,6 +257,7 @@ class Cascade:
         # each row's bounds when it is not held (what a dropped row is checked on, or gets back)
         self._open_lba, self._open_uba = self.lba.copy(), self.uba.copy()
         self.bent: list[bool] = []  # by level: did `levels` bend it
+        self.exit_flag = 1  # DAQP's exit flag of the last QP (`_solve`)
         self._set_row_bounds()
 
     def _set_row_bounds(self) -> None:
@@ -263,15 +272,16 @@ class Cascade:
         clip_to_daqp(lbx, lower[: lbx.size])
         clip_to_daqp(ubx, upper[: ubx.size])
         qp = FixedEliminated.of(self.A, lower, upper, self._layouts)
-        x, _, multipliers = daqp_qp(H, f, qp)
+        x, flag, multipliers = daqp_qp(H, f, qp)
         if x is None and (feasible or self.relaxed_point is not None):  # (see SLIVER_WIDENING)
             qp = qp.widened(SLIVER_WIDENING)
-            x, _, multipliers = daqp_qp(H, f, qp)
+            x, flag, multipliers = daqp_qp(H, f, qp)
             if x is None:
-                x, _, multipliers = daqp_qp(H, f, qp, SLIVER_PRIMAL_TOL)
+                x, flag, multipliers = daqp_qp(H, f, qp, SLIVER_PRIMAL_TOL)
         if x is not None and qp.faint.size and not self._holds(x):  # (see DAQP_ZERO_TOL)
             qp = FixedEliminated.of(self.A, lower, upper, self._layouts, faint_bounded=True)
-            x, _, multipliers = daqp_qp(H, f, qp)
+            x, flag, multipliers = daqp_qp(H, f, qp)
+        self.exit_flag = flag  # (DAQP's, of its last solve: 1 also where the answer crossed a row)
         self._last_qp = None
         if x is None or not self._holds(x):
             return None
@@ -292,7 +302,7 @@ class Cascade:
         return self._solve(self.H, self.f, lo, hi)
 
     def _proximal(self, weights: np.ndarray, linear: np.ndarray, step: float, lbx, ubx,
-                  iterations: int = PROXIMAL_ITERATIONS) -> np.ndarray | None:
+                  iterations: int = PROXIMAL_ITERATIONS, feasible: bool = False) -> np.ndarray | None:
         """min φ(x) = ½Σwⱼxⱼ² + linearᵀx over the feasible set, by the proximal-point method:
         x = argmin φ(x)/ρ + ½‖x − c‖² (scaled variables), a fixed point of which minimizes φ.
 
@@ -306,14 +316,15 @@ class Cascade:
         may fail on the thin feasible sets the levels above leave: if it does at once, ρ starts
         again at 1 and shrinks tenfold per step down to `step`; a later failed solve is tried
         again at a larger ρ (`BACKOFF_LIMIT`), and past that the last iterate is the answer
-        (feasible, and as close to the minimum as DAQP could go). At most `iterations` QPs a run."""
-        x = self._proximal_steps(weights, linear, step, step, lbx, ubx, iterations)
+        (feasible, and as close to the minimum as DAQP could go). At most `iterations` QPs a run.
+        `feasible`: the caller has a point of the feasible set (`_solve`)."""
+        x = self._proximal_steps(weights, linear, step, step, lbx, ubx, iterations, feasible)
         if x is None and weights.any():
-            x = self._proximal_steps(weights, linear, 1.0, step, lbx, ubx, iterations)
+            x = self._proximal_steps(weights, linear, 1.0, step, lbx, ubx, iterations, feasible)
         return x
 
     def _proximal_steps(self, weights, linear, rho, step, lbx, ubx,
-                        iterations: int = PROXIMAL_ITERATIONS) -> np.ndarray | None:
+                        iterations: int = PROXIMAL_ITERATIONS, feasible: bool = False) -> np.ndarray | None:
         center, x = self.nominal, None
         best_bounds = None if weights.any() else self._best_bounds(linear, lbx, ubx)
         seen = (weights != 0.0) | (linear != 0.0)
@@ -322,7 +333,7 @@ class Cascade:
         for _ in range(iterations):
             if rho != hessian_rho:  # (ρ stays at `step` once there: the same Hessian)
                 hessian, hessian_rho = np.diag(1.0 + weights / rho), rho
-            solved = self._solve(hessian, linear / rho - center, lbx, ubx)
+            solved = self._solve(hessian, linear / rho - center, lbx, ubx, feasible)
             if solved is None:
                 if solved_rho is None or rho >= BACKOFF_LIMIT:
                     return x
@@ -389,12 +400,19 @@ class Cascade:
             t = min(t, float(np.min(up, initial=np.inf)), float(np.min(down, initial=np.inf)))
         return max(t, 0.0)
 
-    def scale(self, level: int, lbx, ubx) -> np.ndarray | None:
-        """max s of `level` (its δ fixed in lbx/ubx), the levels below free."""
+    def scale(self, level: int, lbx, ubx, feasible: bool = False) -> np.ndarray | None:
+        """max s of `level` (its δ fixed in lbx/ubx), the levels below free; None if infeasible
+        (or DAQP failed at every step of SCALE_RETRY_STEPS). `feasible`: the caller has a point
+        of this stage's feasible set (`_solve`)."""
         s, _ = self.structure.priorities[level]
         linear = np.zeros(lbx.size)
         linear[s] = -1.0 / self.nominal[s]
-        return self._proximal(np.zeros(lbx.size), linear, SCALE_STEP, lbx, ubx)
+        x = self._proximal(np.zeros(lbx.size), linear, SCALE_STEP, lbx, ubx, feasible=feasible)
+        for step in SCALE_RETRY_STEPS:  # (see SCALE_RETRY_STEPS)
+            if x is not None or self.exit_flag == DAQP_INFEASIBLE:
+                break
+            x = self._proximal(np.zeros(lbx.size), linear, step, lbx, ubx, feasible=feasible)
+        return x
 
     def bend(self, level: int, lbx, ubx) -> np.ndarray | None:
         """min ‖δ‖² of `level` (its s free in [0, 1]), the levels below free."""
@@ -621,7 +639,7 @@ class Cascade:
                     self._admit(x, lbx, ubx)
                     lbx[bend] = ubx[bend] = x[bend]
                     # (the bend's solution witnesses a scaling)
-                    scaled = self.finish_lowest(lbx, ubx, x) if lowest else self.scale(i, lbx, ubx)
+                    scaled = self.finish_lowest(lbx, ubx, x) if lowest else self.scale(i, lbx, ubx, feasible=True)
                     x = x if scaled is None else scaled
                 if lowest:
                     return x
