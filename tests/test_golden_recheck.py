@@ -1,0 +1,70 @@
+"""The golden test's second look (codegen.bundle.recheck_golden): a vector the C misses is measured
+again with more samples, and only a vector whose own answer rounding moves is compared less."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import dcts_spec
+from dcts_spec.codegen import GoldenMismatch, bundle, compile_bundle
+from dcts_spec.codegen.states import golden_states
+from dcts_spec.controller import Controller
+
+MINIMAL = Path(__file__).resolve().parent.parent / "specs" / "minimal.yaml"
+VECTOR = 5  # the vector made to mismatch
+
+
+def _tampered(part: str):
+    """compute_golden with VECTOR's `part` (x: its QP solution, tau: its torques) moved off the
+    Python runtime's answer, so the C test fails there."""
+    real = bundle.compute_golden
+
+    def compute(controller, states):
+        golden = real(controller, states)
+        getattr(golden, part)[VECTOR, 0] += 1.0
+        return golden
+
+    return compute
+
+
+def test_a_vector_whose_answer_rounding_moves_is_compared_less_on_a_second_look(tmp_path, monkeypatch):
+    """The C misses VECTOR's QP solution; measured again, that solution moves with rounding (made
+    so here: the spread of RECHECK_SAMPLES samples is infinite for it) and the torques do not: the
+    test then compares its torques only, passes, and the manifest and a note say so."""
+    monkeypatch.setenv("DCTS_CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.setattr(bundle, "compute_golden", _tampered("x"))
+    spread = Controller.answer_spread
+
+    def second_look(self, q, dq, tau_ext, ref, x, samples, enough):
+        measured = spread(self, q, dq, tau_ext, ref, x, samples, enough)
+        return np.array([measured[0], np.inf]) if samples == bundle.RECHECK_SAMPLES else measured
+
+    monkeypatch.setattr(Controller, "answer_spread", second_look)
+    report = compile_bundle(MINIMAL, tmp_path / "bundle")
+    golden = report.manifest["golden"]
+    assert golden["undetermined_on_a_second_look"] == [VECTOR] and VECTOR in golden["compared_on_command"]
+    assert any(f"golden vectors [{VECTOR}]" in note for note in report.notes), report.notes
+    assert "1 compared on tau and ddq only" in report.manifest["host"]["test_summary"]
+
+
+def test_a_mismatch_on_a_determined_vector_stands(tmp_path, monkeypatch):
+    """The C misses VECTOR's torques, which the Python runtime's replay does not give either (they
+    were moved): nothing is compared less, and the build fails naming the vector."""
+    monkeypatch.setenv("DCTS_CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.setattr(bundle, "compute_golden", _tampered("tau"))
+    with pytest.raises(GoldenMismatch) as failed:
+        compile_bundle(MINIMAL, tmp_path / "bundle")
+    assert failed.value.vectors == [VECTOR]
+    assert not (tmp_path / "bundle").exists()
+
+
+def test_a_determined_vector_stays_compared():
+    """recheck_golden on vectors whose answers rounding does not move: unchanged."""
+    controller = dcts_spec.build_controller(MINIMAL)
+    golden = bundle.compute_golden(controller, golden_states(controller, 12))
+    before = golden.compared.copy()
+    assert bundle.recheck_golden(controller, golden, [3, 7]) == []
+    assert np.array_equal(golden.compared, before)
