@@ -23,6 +23,7 @@ from .formulations.fallback import fallback_torque, plausible_velocity
 from .formulations.hierarchy import OverConstrainedLevel
 from .formulations.parameters import ParameterLayout
 from .formulations.qp import BOUNDS
+from .limits.base import STATE_TOLERANCE  # (re-exported: bundle, tests)
 from .parameter_ramp import ParameterRamp, ramp_steps
 from .robot.model import Robot
 from .solve import (Hint, Structure, check_bounds, marginal_rows, rounding_spread, solve_hinted, to_optimum,
@@ -60,9 +61,6 @@ TORQUE_TOLERANCE = 1e-5
 # A row is active (binding) at the solution when it is this close to its bound, relative to
 # max(1, |bound|): then an over-constrained lowest level's scaling needs the solve without bounds.
 ACTIVE_TOLERANCE = 1e-9
-# The state is beyond a bound's position or velocity limit if it is by more than this (rad, m,
-# rad/s or m/s): what "a bound crossed" means to the user.
-STATE_TOLERANCE = 1e-5
 # From this many QP-data operations on, a control law's large products are kernel calls
 # (`symbolic.linalg.looped_products`): unrolled QP data that large compile only at -O0
 # (codegen.flags.QP_DATA_O0_FROM is this number), slower than the looped code at -O1. Counted

@@ -8,6 +8,11 @@ import casadi as ca
 import numpy as np
 
 
+# The state is beyond a bound's position or velocity limit if it is by more than this (rad, m,
+# rad/s or m/s): what "a bound crossed" means to the user (the status; `viability`'s give-way).
+STATE_TOLERANCE = 1e-5
+
+
 @dataclass
 class AccelerationRows:
     """lower ≤ matrix · a + offset ≤ upper, one row per bounded coordinate."""

@@ -24,6 +24,8 @@ from __future__ import annotations
 
 import casadi as ca
 
+from .base import STATE_TOLERANCE
+
 # The state is symbolic in the controller and numeric in the tests; the bounds are then SX or DM.
 # A limit is a number (±inf: none) or a run-time parameter (SX, always finite: it narrows a finite
 # compiled limit), so which terms exist is decided when the controller is compiled.
@@ -146,17 +148,21 @@ def acceleration_bounds(
         upper = ca.fmin(ca.fmax(upper, slowest), fastest)
         lower = ca.fmin(ca.fmax(lower, slowest), fastest)
     # Braking allowed beyond what the limits ask, by how far the state is beyond its compiled
-    # envelope (of upper, of lower): by up to Δv/dt + 2Δx/dt², the acceleration that removes the
-    # excess in one period; 0 at the envelope, growing continuously beyond it.
+    # envelope (of upper, of lower) by more than STATE_TOLERANCE: by up to Δv/dt + 2Δx/dt², the
+    # acceleration that removes the excess in one period; 0 up to the tolerance, growing
+    # continuously beyond it. Not within the tolerance, where the state counts as within its
+    # limits (status "ok"): from 0 there, a Z1's wrist 3–7e-6 rad beyond its position limit was
+    # commanded 28–39 rad/s² against a 25 rad/s² acceleration limit with status "ok" (2Δx/dt² is
+    # 20 rad/s² at 1e-5 rad and 1 kHz; found from outside).
     low_env, high_env, v_env = envelope if envelope is not None else (x_min, x_max, v_max)
     give_down, give_up = ca.SX(0.0), ca.SX(0.0)
     if _limited(v_env):
-        give_down += ca.fmax(v - v_env, 0.0) / dt
-        give_up += ca.fmax(-v - v_env, 0.0) / dt
+        give_down += ca.fmax(v - v_env - STATE_TOLERANCE, 0.0) / dt
+        give_up += ca.fmax(-v - v_env - STATE_TOLERANCE, 0.0) / dt
     if _limited(high_env):
-        give_down += 2.0 * ca.fmax(x - high_env, 0.0) / dt**2
+        give_down += 2.0 * ca.fmax(x - high_env - STATE_TOLERANCE, 0.0) / dt**2
     if _limited(low_env):
-        give_up += 2.0 * ca.fmax(low_env - x, 0.0) / dt**2
+        give_up += 2.0 * ca.fmax(low_env - x - STATE_TOLERANCE, 0.0) / dt**2
     if _limited(accel_limit):
         # The acceleration limit bounds the command, but gives way to the braking that takes the
         # state back within its compiled envelope (as little as the position and velocity terms
