@@ -66,7 +66,7 @@ def starter_text(file: Path, robot: str) -> str:
     if builtin:
         robot_key, q0, unit = f"model: {robot}", READY_POSTURES.get(robot), "deg"
     else:
-        robot_key, q0, unit = f"urdf: {_relative(Path(robot), file.parent)}", None, "rad"
+        robot_key, q0, unit = f"urdf: {_urdf_path(Path(robot), file.parent)}", None, "rad"
     if q0 is None:
         q0 = [round(_middle(j.position.min, j.position.max), 3) for j in description.joints]
     values = {
@@ -137,8 +137,11 @@ def _flow(values) -> str:
     return "[" + ", ".join(f"{float(v) + 0.0:g}" for v in values) + "]"  # (+ 0.0: no -0)
 
 
-def _relative(path: Path, start: Path) -> str:
-    """`path` as the spec file will name it: relative to the spec's folder when it can be."""
+def _urdf_path(path: Path, start: Path) -> str:
+    """`path` as the spec file will name it: as given if absolute (`../../work/...` broke when the
+    spec moved; found from outside), else relative to the spec's folder when it can be."""
+    if path.is_absolute():
+        return path.as_posix()
     try:
         return Path(os.path.relpath(path.resolve(), start.resolve())).as_posix()
     except ValueError:  # another drive (Windows)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
 
 import numpy as np
@@ -112,7 +113,10 @@ def test_init_from_a_urdf_names_it_relative_to_the_spec(tmp_path: Path) -> None:
     spec = tmp_path / "specs" / "arm.yaml"
     spec.parent.mkdir()
     assert invoke("init", str(spec), "--robot", str(urdf)).exit_code == 0
-    assert "urdf: ../robots/arm.urdf" in spec.read_text()
+    assert f"urdf: {urdf.as_posix()}" in spec.read_text()  # (absolute as given: the spec may move)
+    spec.unlink()
+    assert invoke("init", str(spec), "--robot", os.path.relpath(urdf)).exit_code == 0
+    assert "urdf: ../robots/arm.urdf" in spec.read_text()  # (relative: to the spec's folder)
     # It starts where the tool moves along every axis: the middle of the iiwa14's ranges is the arm
     # straight up, singular, and that spec was validated with warnings and never held the tool.
     validated = invoke("validate", "--json", str(spec))
