@@ -598,6 +598,7 @@ def test_beyond_its_envelope_the_braking_is_not_capped_by_the_acceleration_limit
     where Δv > a_max·dt (the limit gives way by exactly what that needs); continuous across a_max·dt; within its limits, bounded by
     ±a_max. A velocity limit lowered at run time (the envelope is the compiled one) is reached
     braking at the acceleration limit."""
+    from dcts_spec.limits.base import STATE_TOLERANCE
     from dcts_spec.limits.viability import VELOCITY_MARGIN, acceleration_bounds
 
     v_max, a_max = 2.0, 20.0
@@ -618,8 +619,8 @@ def test_beyond_its_envelope_the_braking_is_not_capped_by_the_acceleration_limit
         lo, hi = bounds(float(v))
         assert -a_max <= lo <= hi <= a_max, v
     assert bounds(1.5, limit=0.5) == (-a_max, -a_max)  # a lowered limit: braking at a_max, not 1000 rad/s²
-    lo, hi = bounds(2.5, limit=0.5)  # beyond the envelope too: back within it in one period
-    assert hi == pytest.approx(-a_max - 0.5 / DT, rel=1e-12) and lo == hi
+    lo, hi = bounds(2.5, limit=0.5)  # beyond the envelope too: back within it (and its tolerance) in one period
+    assert hi == pytest.approx(-a_max - (0.5 - STATE_TOLERANCE) / DT, rel=1e-12) and lo == hi
 
 
 def test_a_step_during_which_a_position_limit_will_be_crossed_is_not_ok():
