@@ -15,6 +15,7 @@ from dcts_spec.controller import Controller
 
 MINIMAL = Path(__file__).resolve().parent.parent / "specs" / "minimal.yaml"
 VECTOR = 5  # the vector made to mismatch
+GOLDEN_COUNT = 30  # (fewer than a bundle has: the test is about one vector)
 
 
 def _tampered(part: str):
@@ -34,7 +35,6 @@ def test_a_vector_whose_answer_rounding_moves_is_compared_less_on_a_second_look(
     """The C misses VECTOR's QP solution; measured again, that solution moves with rounding (made
     so here: the spread of RECHECK_SAMPLES samples is infinite for it) and the torques do not: the
     test then compares its torques only, passes, and the manifest and a note say so."""
-    monkeypatch.setenv("DCTS_CACHE_DIR", str(tmp_path / "cache"))
     monkeypatch.setattr(bundle, "compute_golden", _tampered("x"))
     spread = Controller.answer_spread
 
@@ -43,7 +43,7 @@ def test_a_vector_whose_answer_rounding_moves_is_compared_less_on_a_second_look(
         return np.array([measured[0], np.inf]) if samples == bundle.RECHECK_SAMPLES else measured
 
     monkeypatch.setattr(Controller, "answer_spread", second_look)
-    report = compile_bundle(MINIMAL, tmp_path / "bundle")
+    report = compile_bundle(MINIMAL, tmp_path / "bundle", golden_count=GOLDEN_COUNT)
     golden = report.manifest["golden"]
     assert golden["undetermined_on_a_second_look"] == [VECTOR] and VECTOR in golden["compared_on_command"]
     assert any(f"golden vectors [{VECTOR}]" in note for note in report.notes), report.notes
@@ -53,10 +53,9 @@ def test_a_vector_whose_answer_rounding_moves_is_compared_less_on_a_second_look(
 def test_a_mismatch_on_a_determined_vector_stands(tmp_path, monkeypatch):
     """The C misses VECTOR's torques, which the Python runtime's replay does not give either (they
     were moved): nothing is compared less, and the build fails naming the vector."""
-    monkeypatch.setenv("DCTS_CACHE_DIR", str(tmp_path / "cache"))
     monkeypatch.setattr(bundle, "compute_golden", _tampered("tau"))
     with pytest.raises(GoldenMismatch) as failed:
-        compile_bundle(MINIMAL, tmp_path / "bundle")
+        compile_bundle(MINIMAL, tmp_path / "bundle", golden_count=GOLDEN_COUNT)
     assert failed.value.vectors == [VECTOR]
     assert not (tmp_path / "bundle").exists()
 
