@@ -66,6 +66,8 @@ from .stage_qp import (
 # weight 1/ρ enters the Hessian: a moderate ρ keeps it well conditioned, at the price of a few
 # more steps.
 SCALE_STEP = 1e-8
+BEND_STEP = 1e-5
+MAX_EXTRAPOLATION = 1e6
 # A scaling stage whose first QP DAQP fails other than by calling it infeasible (cycling) is run
 # again at these gentler steps (a shorter first step, the same maximum): on a Kinova's 4 levels,
 # with two rows held by the level above (`_hold_face`), DAQP cycled at 1e-8, the stage counted as
@@ -74,8 +76,6 @@ SCALE_STEP = 1e-8
 # the stage infeasible, it bends as before.
 SCALE_RETRY_STEPS = (1e-6, 1e-4)
 DAQP_INFEASIBLE = -1  # DAQP's exit flag for a QP it found infeasible
-BEND_STEP = 1e-5
-MAX_EXTRAPOLATION = 1e6
 # Relative: a relaxed bound is widened this much beyond what was achieved. The stages after the
 # relaxation run on a sliver this wide around the least violation: at 1e-7, every one of them
 # failed in 13 of 574 relaxed states of the TIAGo Pro spec above and 2 of 592 of a 24-joint G1's
