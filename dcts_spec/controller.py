@@ -23,7 +23,7 @@ from .formulations.fallback import fallback_torque, plausible_velocity
 from .formulations.hierarchy import OverConstrainedLevel
 from .formulations.parameters import ParameterLayout
 from .formulations.qp import BOUNDS
-from .limits.base import STATE_TOLERANCE  # (re-exported: bundle, tests)
+from .limits.base import STATE_TOLERANCE
 from .parameter_ramp import ParameterRamp, ramp_steps
 from .robot.model import Robot
 from .solve import (Hint, Structure, check_bounds, marginal_rows, rounding_spread, solve_hinted, to_optimum,

@@ -15,7 +15,7 @@ import hashlib
 import json
 import re
 import shutil
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from importlib import metadata, resources
 from pathlib import Path
@@ -24,7 +24,7 @@ import casadi as ca
 import numpy as np
 
 from ..controller import (ACTIVE_TOLERANCE, DATA_OUTPUTS, MAX_QP_DATA_OPERATIONS, STATE_TOLERANCE,
-                          STATUS_LIMITS_RELAXED, STATUS_OK, TORQUE_TOLERANCE, Controller)
+                          STATUS_LIMITS_RELAXED, STATUS_OK, TORQUE_TOLERANCE, Controller, StepResult)
 from ..formulations import fallback
 from ..formulations.qp import BOUNDS, HARD
 from ..parameter_ramp import ramp_steps
@@ -354,11 +354,31 @@ def golden_coverage(manifest: dict) -> list[str]:
             for status, name in paths if counts.get(status, 0) < GOLDEN_PER_STATUS]
 
 
+def _replay(controller: Controller, states: list[State]) -> Iterator[tuple[int, State, np.ndarray | None, StepResult]]:
+    """The Python runtime over the states in order, from a fresh controller state, each state's
+    parameter set taken before its step: (index, state, its reference or None, the step's result);
+    the controller fresh again after."""
+    controller.reset()
+    controller.reset_params()
+    try:
+        for k, s in enumerate(states):
+            if s.params is not None:
+                controller.set_params(s.params)
+            ref = s.ref if controller.ref_size else None
+            yield k, s, ref, controller.step(s.q, s.dq, s.tau_ext, ref)
+    finally:
+        controller.reset()
+        controller.reset_params()
+
+
+def _spread_limit(controller: Controller, result: StepResult) -> float:
+    """The spread a determined answer may have: SPREAD_FRACTION of its vector's tolerance."""
+    return SPREAD_FRACTION * golden_tolerances(controller.formulation)[result.status == STATUS_LIMITS_RELAXED]
+
+
 def compute_golden(controller: Controller, states: list[State]) -> Golden:
     """Run the Python runtime over the states in order (a fresh controller state first), and
     measure how far each answer is determined by its data."""
-    controller.reset()
-    controller.reset_params()
     n, nx, levels = controller.n, controller.nx, len(controller.priorities)
     count = len(states)
     tau, ddq = np.zeros((count, n)), np.zeros((count, n))
@@ -366,21 +386,14 @@ def compute_golden(controller: Controller, states: list[State]) -> Golden:
     nxs, status = np.zeros(count, dtype=int), np.zeros(count, dtype=int)
     spread, limit = np.zeros((count, 2)), np.zeros(count)  # limit: the spread a determined answer may have
     status_determined = np.ones(count, dtype=bool)
-    tolerances = golden_tolerances(controller.formulation)
-    for k, s in enumerate(states):
-        if s.params is not None:
-            controller.set_params(s.params)
-        ref = s.ref if controller.ref_size else None
-        r = controller.step(s.q, s.dq, s.tau_ext, ref)
+    for k, s, ref, r in _replay(controller, states):
         tau[k], ddq[k], scaling[k], status[k] = r.tau, r.ddq, r.scaling, r.status
         nxs[k] = r.x.size
         x[k, : r.x.size] = r.x
         if r.status >= 0:
-            limit[k] = SPREAD_FRACTION * tolerances[r.status == STATUS_LIMITS_RELAXED]
+            limit[k] = _spread_limit(controller, r)
             spread[k] = controller.answer_spread(s.q, s.dq, s.tau_ext, ref, r.x, SPREAD_SAMPLES, limit[k])
             status_determined[k] = controller.status_determined(s.q, s.dq, s.tau_ext, ref, r.x)
-    controller.reset()
-    controller.reset_params()
     return Golden(states, tau, ddq, scaling, x, nxs, status, spread, _compared(spread, limit), status_determined)
 
 
@@ -397,26 +410,17 @@ def recheck_golden(controller: Controller, golden: Golden, vectors: list[int]) -
     `compute_golden` ran it); where it is now beyond what a determined answer may have, the test
     compares less of the vector (`golden` changed in place). Returns those vectors: none means the
     mismatch stands."""
-    controller.reset()
-    controller.reset_params()
-    tolerances = golden_tolerances(controller.formulation)
     found = []
-    for k, s in enumerate(golden.states[: max(vectors, default=-1) + 1]):
-        if s.params is not None:
-            controller.set_params(s.params)
-        ref = s.ref if controller.ref_size else None
-        r = controller.step(s.q, s.dq, s.tau_ext, ref)
+    for k, s, ref, r in _replay(controller, golden.states[: max(vectors, default=-1) + 1]):
         if k not in vectors or r.status < 0 or not np.array_equal(r.tau, golden.tau[k]):
             continue  # (a replay that does not give the vector's answer changes nothing)
-        limit = SPREAD_FRACTION * tolerances[r.status == STATUS_LIMITS_RELAXED]
+        limit = _spread_limit(controller, r)
         spread = controller.answer_spread(s.q, s.dq, s.tau_ext, ref, r.x, RECHECK_SAMPLES, limit)
         golden.spread[k] = np.maximum(golden.spread[k], spread)
         compared = int(_compared(golden.spread[k : k + 1], np.array([limit]))[0])
         if compared < golden.compared[k]:
             golden.compared[k] = compared
             found.append(k)
-    controller.reset()
-    controller.reset_params()
     return found
 
 
@@ -548,12 +552,11 @@ class BundleSources:
     golden: Golden | None = None
 
     def write_golden(self) -> None:
-        """The golden vectors' files and manifest.json's record of them, from `golden` (after
-        `recheck_golden` changed it)."""
+        """The golden vectors' files, and the manifest's record of them (its file is the caller's
+        to write), from `golden` (after `recheck_golden` changed it)."""
         m = self.manifest
         _write_golden(self.directory, self.name, self.golden, max(m["nref"], 1), max(m["nparam"], 1))
         m["golden"].update(_golden_comparisons(self.golden))
-        (self.directory / "manifest.json").write_text(json.dumps(m, indent=2) + "\n")
 
 
 def _golden_tolerances(formulation: str) -> dict[str, str]:

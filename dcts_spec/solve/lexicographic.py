@@ -407,11 +407,10 @@ class Cascade:
         s, _ = self.structure.priorities[level]
         linear = np.zeros(lbx.size)
         linear[s] = -1.0 / self.nominal[s]
-        x = self._proximal(np.zeros(lbx.size), linear, SCALE_STEP, lbx, ubx, feasible=feasible)
-        for step in SCALE_RETRY_STEPS:  # (see SCALE_RETRY_STEPS)
+        for step in (SCALE_STEP, *SCALE_RETRY_STEPS):  # (see SCALE_RETRY_STEPS)
+            x = self._proximal(np.zeros(lbx.size), linear, step, lbx, ubx, feasible=feasible)
             if x is not None or self.exit_flag == DAQP_INFEASIBLE:
                 break
-            x = self._proximal(np.zeros(lbx.size), linear, step, lbx, ubx, feasible=feasible)
         return x
 
     def bend(self, level: int, lbx, ubx) -> np.ndarray | None:
