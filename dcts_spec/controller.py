@@ -26,8 +26,9 @@ from .formulations.qp import BOUNDS
 from .limits.base import STATE_TOLERANCE
 from .parameter_ramp import ParameterRamp, ramp_steps
 from .robot.model import Robot
-from .solve import (Hint, Structure, check_bounds, marginal_rows, rounding_spread, solve_hinted, to_optimum,
+from .solve import (Hint, Structure, check_bounds, marginal_rows, solve_hinted, to_optimum,
                     unbounded_solution)
+from .solve.sensitivity import AnswerData
 from .solve.stage_qp import FEASIBILITY_TOLERANCE
 from .spec import Spec, SpecError, load_spec
 from .symbolic.linalg import looped_products
@@ -326,21 +327,22 @@ class Controller:
         x, self._hint = solve_hinted(*self._qp(data), self._structure, data["Q"], self._hint)
         return x
 
+    def answer_data(self, q, dq, tau_ext, ref, x: np.ndarray) -> AnswerData | None:
+        """The last step's answer x (its QP solution, at this state) with its QP data and command
+        maps, for `solve.sensitivity` (None without a QP)."""
+        if not self.nx:
+            return None
+        data = self.evaluate_data(q, dq, tau_ext, ref)
+        return AnswerData(self._qp(data), self._structure, x, data["tau0"].ravel(), data["T"], data["ddq0"].ravel(),
+                          data["Q"], data["bound_shift"].ravel())
+
     def answer_spread(self, q, dq, tau_ext, ref, x: np.ndarray, samples: int, enough: float) -> np.ndarray:
         """How far the last step's answer x (its QP solution, at this state) is determined by its QP
         data: [the command's, the solution's] largest relative change when the data change at the
         level of their rounding (`solve/sensitivity.py`; `samples` solves, stopping once both are
         above `enough`), the command being τ and q̈, the solution x. Zeros without a QP."""
-        if not self.nx:
-            return np.zeros(2)
-        data = self.evaluate_data(q, dq, tau_ext, ref)
-
-        def outputs(answer: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-            command = np.concatenate([data["tau0"].ravel() + data["T"] @ answer, data["ddq0"].ravel() + data["Q"] @ answer])
-            return command, answer
-
-        return rounding_spread(*self._qp(data), self._structure, x, outputs, samples, enough, acceleration_map=data["Q"],
-                               bound_shift=data["bound_shift"].ravel())
+        answer = self.answer_data(q, dq, tau_ext, ref, x)
+        return np.zeros(2) if answer is None else answer.spread(samples, enough)
 
     def status_determined(self, q, dq, tau_ext, ref, x: np.ndarray) -> bool:
         """Is the last step's status ("ok" or "limits relaxed", its answer x at this state) one that

@@ -58,3 +58,32 @@ def test_each_group_of_outputs_has_its_own_spread_and_sampling_goes_on_while_one
     monkeypatch.setattr(sensitivity, "solve_lexicographic", lambda *a: solves.append(1) or original(*a))
     spread = rounding_spread(*args, structure, x, lambda a: (a, np.zeros(2)), samples=12, enough=1e-3)
     assert spread[0] > 1e-3 and spread[1] == 0.0 and len(solves) == 12
+
+
+def _answers() -> list[sensitivity.AnswerData]:
+    """Two saved states' answers, one its data determine and one they do not, with command maps
+    (τ₀ = 0, T = I; q̈₀ = 0, Q = 2 I)."""
+    answers = []
+    for name in ("undetermined_after_relaxation", "stalled_scale_stage"):
+        args, structure = saved_qp(name)
+        x = solve_lexicographic(*args, structure)
+        n = x.size
+        answers.append(sensitivity.AnswerData(tuple(args), structure, x, np.zeros(n), np.eye(n), np.zeros(n), 2.0 * np.eye(n),
+                                              np.zeros(len(structure.bound_rows))))
+    return answers
+
+
+def test_spreads_measured_in_worker_processes_are_those_measured_here(monkeypatch):
+    """`spreads` shares the answers out among worker processes (the golden vectors' spreads at 29
+    joints): the same numbers, in the answers' order, as measuring each in this process; a worker
+    that cannot start leaves its answers to this process."""
+    answers = _answers()
+    here = sensitivity.spreads(answers, 4, [1e-3, 1e-3], workers=1)
+    assert here[0][1] > 1e-3 and here[1][1] < 1e-8  # (the two kinds: an order swapped would show)
+    started = []
+    run = sensitivity.run_workers
+    monkeypatch.setattr(sensitivity, "run_workers", lambda shares: started.append(len(shares)) or run(shares))
+    assert all(np.array_equal(a, b) for a, b in zip(sensitivity.spreads(answers, 4, [1e-3, 1e-3], workers=2), here))
+    assert started == [2]
+    monkeypatch.setattr(sensitivity.sys, "executable", "/nonexistent/python")
+    assert all(np.array_equal(a, b) for a, b in zip(sensitivity.spreads(answers, 4, [1e-3, 1e-3], workers=2), here))

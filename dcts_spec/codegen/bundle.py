@@ -15,6 +15,7 @@ import hashlib
 import json
 import re
 import shutil
+import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from importlib import metadata, resources
@@ -30,6 +31,7 @@ from ..formulations.qp import BOUNDS, HARD
 from ..parameter_ramp import ramp_steps
 from ..solve import BOUND_TOLERANCE, DAQP_SETTINGS
 from ..solve import lexicographic, optimality, stage_qp
+from ..solve.sensitivity import AnswerData, available_cpus, spreads
 from ..spec import Spec
 from ..spec.loader import recorded_bytes
 from .layout import (C_DATA_OUTPUTS, array_lengths, casadi_work_lengths, daqp_storage, header_fields, workspace_fields,
@@ -309,6 +311,11 @@ SPREAD_FRACTION = 0.1
 # force) had a vector whose torques 1 in 40 rounding-size changes of q moved by 3.8 Nm; its 12
 # samples had not, 50 did (the C's answer was one of those, 6.6 relative away).
 RECHECK_SAMPLES = 100
+# The spreads run in worker processes (solve.sensitivity.spreads) where the replay of the golden
+# states took at least this long (s): their samples then take about SPREAD_SAMPLES times as long,
+# and a worker's start (~0.6 s) pays for itself. (A 7-joint bundle's replay: ~0.15 s; a 29-joint
+# humanoid's with 5 levels: ~3 s, its spreads 30–40 s of one core.)
+PARALLEL_SPREADS_FROM = 0.5
 COMPARED_STATUS, COMPARED_COMMAND, COMPARED_ALL = 0, 1, 2  # Golden.compared
 
 
@@ -378,7 +385,8 @@ def _spread_limit(controller: Controller, result: StepResult) -> float:
 
 def compute_golden(controller: Controller, states: list[State]) -> Golden:
     """Run the Python runtime over the states in order (a fresh controller state first), and
-    measure how far each answer is determined by its data."""
+    measure how far each answer is determined by its data (in worker processes where that takes
+    long: PARALLEL_SPREADS_FROM)."""
     n, nx, levels = controller.n, controller.nx, len(controller.priorities)
     count = len(states)
     tau, ddq = np.zeros((count, n)), np.zeros((count, n))
@@ -386,14 +394,21 @@ def compute_golden(controller: Controller, states: list[State]) -> Golden:
     nxs, status = np.zeros(count, dtype=int), np.zeros(count, dtype=int)
     spread, limit = np.zeros((count, 2)), np.zeros(count)  # limit: the spread a determined answer may have
     status_determined = np.ones(count, dtype=bool)
+    answers: dict[int, AnswerData] = {}
+    start = time.perf_counter()
     for k, s, ref, r in _replay(controller, states):
         tau[k], ddq[k], scaling[k], status[k] = r.tau, r.ddq, r.scaling, r.status
         nxs[k] = r.x.size
         x[k, : r.x.size] = r.x
         if r.status >= 0:
             limit[k] = _spread_limit(controller, r)
-            spread[k] = controller.answer_spread(s.q, s.dq, s.tau_ext, ref, r.x, SPREAD_SAMPLES, limit[k])
+            answer = controller.answer_data(s.q, s.dq, s.tau_ext, ref, r.x)
+            if answer is not None:
+                answers[k] = answer
             status_determined[k] = controller.status_determined(s.q, s.dq, s.tau_ext, ref, r.x)
+    workers = available_cpus() if time.perf_counter() - start >= PARALLEL_SPREADS_FROM else 1
+    for k, value in zip(answers, spreads(list(answers.values()), SPREAD_SAMPLES, limit[list(answers)], workers)):
+        spread[k] = value
     return Golden(states, tau, ddq, scaling, x, nxs, status, spread, _compared(spread, limit), status_determined)
 
 

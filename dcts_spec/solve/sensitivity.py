@@ -12,7 +12,14 @@ golden-vector test (codegen/bundle.py) measures this spread for every vector it 
 
 from __future__ import annotations
 
+import os
+import pickle
+import subprocess
+import sys
 from collections.abc import Callable, Sequence
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -62,3 +69,85 @@ def rounding_spread(H, f, A, lbx, ubx, lba, uba, structure: Structure, x: np.nda
         if (spread > enough).all():
             break
     return spread
+
+
+@dataclass
+class AnswerData:
+    """An answer x of a step and what `rounding_spread` needs to measure it (arrays only, so that
+    another process can): the QP's data H, f, A, lbx, ubx, lba, uba, and the command's maps
+    τ = τ₀ + T x, q̈ = q̈₀ + Q x."""
+
+    qp: tuple[np.ndarray, ...]
+    structure: Structure
+    x: np.ndarray
+    tau0: np.ndarray
+    T: np.ndarray
+    ddq0: np.ndarray
+    Q: np.ndarray
+    bound_shift: np.ndarray
+
+    def outputs(self, answer: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(the command (τ, q̈), the QP solution) of an answer."""
+        return np.concatenate([self.tau0 + self.T @ answer, self.ddq0 + self.Q @ answer]), answer
+
+    def spread(self, samples: int, enough: float) -> np.ndarray:
+        """[the command's, the solution's] spread (`rounding_spread`)."""
+        return rounding_spread(*self.qp, self.structure, self.x, self.outputs, samples, enough,
+                               acceleration_map=self.Q, bound_shift=self.bound_shift)
+
+
+def spreads(answers: Sequence[AnswerData], samples: int, enough: Sequence[float], workers: int) -> list[np.ndarray]:
+    """Each answer's `AnswerData.spread` (with its own `enough`), shared out among `workers`
+    processes when more than one (`spread_worker.py`): the samples of one answer depend on nothing
+    else, and at 29 joints the golden vectors' spreads took 30–40 s of one core. Fresh
+    interpreters, not copies of this process (which holds CasADi's and the build's state) nor
+    re-runs of the caller's script (multiprocessing's spawn); the same numbers as in this one.
+    The answers a worker does not return (it could not start, or died) are measured here."""
+    jobs = [(answer, samples, limit) for answer, limit in zip(answers, enough)]
+    results: list[np.ndarray | None] = [None] * len(jobs)
+    if workers > 1 and len(jobs) > 1:
+        shares = [list(range(w, len(jobs), workers)) for w in range(min(workers, len(jobs)))]
+        for share, measured in zip(shares, run_workers([[jobs[k] for k in share] for share in shares])):
+            for k, value in zip(share, measured or []):
+                results[k] = value
+    return [value if value is not None else job[0].spread(*job[1:]) for value, job in zip(results, jobs)]
+
+
+def run_workers(shares: list[list[tuple[AnswerData, int, float]]]) -> list[list[np.ndarray] | None]:
+    """Each share's spreads, measured by a `python -m dcts_spec.solve.spread_worker` of its own
+    (the jobs pickled in, the spreads out); None for a share whose worker failed."""
+    package_root = str(Path(__file__).resolve().parents[2])  # (where dcts_spec is, whatever sys.path said)
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [package_root, os.environ.get("PYTHONPATH")])))
+    command = [sys.executable, "-m", "dcts_spec.solve.spread_worker"]
+    processes = []
+    for share in shares:
+        try:
+            process = subprocess.Popen(command, stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                                       stderr=subprocess.DEVNULL, env=env)
+        except OSError:
+            process = None
+        processes.append(process)
+    payloads = [pickle.dumps(share) for share in shares]
+    with ThreadPoolExecutor(len(processes)) as pool:  # (each pipe fed and drained at once: no deadlock)
+        outputs = list(pool.map(_communicate, processes, payloads))
+    return [None if out is None else pickle.loads(out) for out in outputs]
+
+
+def _communicate(process: subprocess.Popen | None, payload: bytes) -> bytes | None:
+    if process is None:
+        return None
+    try:
+        out, _ = process.communicate(payload)
+    except OSError:
+        process.kill()
+        process.wait()
+        return None
+    return out if process.returncode == 0 else None
+
+
+def available_cpus() -> int:
+    """The CPUs this process may run on."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # (not on Linux)
+        return os.cpu_count() or 1

@@ -158,10 +158,15 @@ class FixedEliminated:
 
 def _daqp_zero_rows(A_free: np.ndarray) -> np.ndarray:
     """The rows DAQP would take for zero rows: their free coefficients' squared norm below
-    DAQP_ZERO_TOL (summed in row order, as the C sums it; a row of zeros is constant already)."""
+    DAQP_ZERO_TOL (summed in row order, as the C sums it: a cumulative sum adds in that order,
+    where NumPy's sum would add pairwise; a row of zeros is constant already)."""
     zero = np.zeros(A_free.shape[0], dtype=bool)
-    for j in np.flatnonzero((A_free * A_free).max(axis=1, initial=0.0) < DAQP_ZERO_TOL):
-        zero[j] = sum(v * v for v in A_free[j].tolist()) < DAQP_ZERO_TOL
+    small = np.flatnonzero((A_free * A_free).max(axis=1, initial=0.0) < DAQP_ZERO_TOL)
+    if not A_free.shape[1]:
+        zero[small] = True  # (no free variable: every norm is 0)
+    elif small.size:
+        rows = A_free[small]
+        zero[small] = np.cumsum(rows * rows, axis=1)[:, -1] < DAQP_ZERO_TOL
     return zero
 
 
