@@ -1467,6 +1467,48 @@ UNSEEN_ROBOTS = {
     # TALOS's 28 joints, four levels, run-time parameters: a relaxed golden vector whose torques 1
     # in 40 rounding-size changes of q move by 3.8 Nm; the golden vectors' 12 samples missed it,
     # and the C, which took the other answer, failed the test (bundle.RECHECK_SAMPLES)
+    # TIAGo's arm (torso, head and wheels locked; first tried from outside): a hand position, a
+    # twist [rz] and a posture, a light wrist, two Cartesian bounds. On a relaxed golden vector C's
+    # bend stage of the twist took answers DAQP gave only at its loosest tolerance, each raising
+    # the bend (101 → 117 → 99 → 116 in ‖δ‖), and reported s = 0.15 where Python's stage ended in
+    # one QP at s = 0: `dcts compile` failed (lexicographic.ASCENT_TOLERANCE)
+    "tiago_arm_a_bend_that_rose": """version: 1
+name: tiago_arm_twist
+robot:
+  urdf: {urdf}/tiago_description/robots/tiago_no_hand.urdf
+  locked_joints: {{torso_lift_joint: 0.15, head_1_joint: 0.0, head_2_joint: 0.0, wheel_left_joint: 0.0, wheel_right_joint: 0.0}}
+limits:
+  joint_torque: {{max: [30, 28, 14, 14, 2.5, 5, 5]}}
+  joint_acceleration: {{max: 20}}
+  cartesian:
+    - {{frame: arm_tool_link, axis: z, min: 0.6}}
+    - {{frame: arm_7_link, normal: [1, 1, 0], max: 0.5}}
+controller:
+  formulation: dcts
+  external_torque: measured
+tasks:
+  - name: hand
+    type: position
+    frame: arm_tool_link
+    priority: 1
+    gains: {{kp: 200, kd: 28}}
+    reference: {{input: true, feedforward: true}}
+  - name: hand_ori
+    type: orientation
+    frame: arm_tool_link
+    axes: [rz]
+    priority: 2
+    gains: {{kp: 50, kd: 14}}
+    reference: {{rpy: [0, 0, 0]}}
+  - name: posture
+    type: joint
+    priority: 3
+    gains: {{kp: 10, kd: 6}}
+    reference: {{q: [0.5, 0.0, -1.5, 0.5, 0.0, 0.0, 0]}}
+scenario:
+  duration: 1.0
+  initial_q: [0.5, 0.0, -1.5, 0.5, 0.0, 0.0, 0]
+""",
     "talos28_a_vector_rounding_decides": """version: 1
 name: talos28_knife_edge
 robot:

@@ -507,7 +507,8 @@ def test_a_stage_stops_when_only_noise_moves(monkeypatch):
     assert _rel(x, _converged(monkeypatch, args, structure)) < 1e-8
 
 
-@pytest.mark.parametrize("name", ["relaxation_cycles", "relaxation_needs_a_gentle_step", "relaxation_needs_many_steps"])
+@pytest.mark.parametrize("name", ["relaxation_cycles", "relaxation_needs_a_gentle_step", "relaxation_needs_many_steps",
+                                  "relaxation_beside_rows_of_1e7"])
 def test_the_relaxation_reaches_the_least_violation(name):
     """relaxation_cycles: QP data of a golden state of a spec with the same tool position at two
     priorities (the lower one least squares): even the top level's bend is infeasible, and DAQP
@@ -520,7 +521,11 @@ def test_the_relaxation_reaches_the_least_violation(name):
     acceleration of 1.2e9 rad/s² on a light joint, a hand beyond a tilted plane; first tried from
     outside): the relaxation's 30th proximal QP was still descending, Σσ 0.94 % above the least,
     with joint bounds crossed by up to 1,455 rad/s² that could hold, and C and Python parted by
-    244 Nm; it needs 60–100 (RELAX_ITERATIONS)."""
+    244 Nm; it needs 60–100 (RELAX_ITERATIONS). relaxation_beside_rows_of_1e7: a Panda after two
+    300 N pushes (joint 2 1.5 rad beyond its limit, 0.25 ms period; found from outside), bound rows
+    of 1e7 in the scaled variables: with slack columns of 1, DAQP answered every QP of the
+    relaxation "optimal, inexact" (torque rows crossed by 1 %) or infeasible, and the step fell
+    back; each slack in its row's scale (Cascade.relax), it relaxes."""
     from dcts_spec.solve.lexicographic import Cascade
 
     args, structure = saved_qp(name)
@@ -1609,3 +1614,26 @@ def test_the_second_level_gets_the_largest_scaling_the_first_leaves(name, reache
     assert best is not None, status
     assert best[s2] / ubx[s2] == pytest.approx(reached, abs=1e-4)
     assert x[s2] / ubx[s2] == pytest.approx(best[s2] / ubx[s2], abs=1e-6)  # (0 before)
+
+
+def test_a_proximal_answer_that_raises_the_stage_objective_counts_as_failed(monkeypatch):
+    """A proximal step cannot raise φ (its QP's optimum costs no more than the last iterate, which is
+    feasible): an answer that does was not solved on the stage's set, and counts as a failed step,
+    the stage keeping the iterate before it (lexicographic.ASCENT_TOLERANCE; a TIAGo arm's relaxed
+    golden vector, whose bend stage in C took three such answers and ended 15 % higher)."""
+    from dcts_spec.solve import lexicographic
+
+    args, structure = saved_qp("bend_fails_at_its_step")
+    cascade = lexicographic.Cascade(*args, structure)
+    _, bend = structure.priorities[0]
+    first, raised = cascade.nominal.copy(), cascade.nominal.copy()
+    first[list(bend)], raised[list(bend)] = 1.0, 2.0  # ‖δ‖² 1 per variable, then 4
+    answers = iter([first, raised])
+    monkeypatch.setattr(lexicographic, "stationary", lambda *_: False)  # (the stub's answers certify nothing)
+
+    def solve(self, H, f, lbx, ubx, feasible=False):
+        self._last_qp = (None, None)
+        return next(answers, None)
+
+    monkeypatch.setattr(lexicographic.Cascade, "_solve", solve)
+    assert np.array_equal(cascade.bend(0, cascade.lbx.copy(), cascade.ubx.copy()), first)

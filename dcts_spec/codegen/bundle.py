@@ -725,6 +725,7 @@ def generate_sources(
         "PROXIMAL_ITERATIONS": lexicographic.PROXIMAL_ITERATIONS,
         "RELAX_ITERATIONS": lexicographic.RELAX_ITERATIONS,
         "BACKOFF_LIMIT": c_double(lexicographic.BACKOFF_LIMIT),
+        "ASCENT_TOLERANCE": c_double(lexicographic.ASCENT_TOLERANCE),
         "PROXIMAL_TOLERANCE": c_double(lexicographic.PROXIMAL_TOLERANCE),
         "ROUNDING_HAIR": c_double(lexicographic.ROUNDING_HAIR),
         "STATIONARY_TOLERANCE": c_double(stage_qp.STATIONARY_TOLERANCE),
