@@ -1511,33 +1511,35 @@ PR2_STATE = ([0.2899, -0.12438676315364361, 0.04010057607701473, 0.0020115697958
               -1.6412020075580553, 0.6767898936792432, 2.5198803420811546, -2.1242295028522045])
 
 
-def _ok_only_where_every_bound_holds(controller, robot, state, premise: bool) -> None:
+def _ok_only_where_every_bound_holds(controller, robot, state) -> None:
     """At `state`, status "ok" only if every joint and Cartesian bound holds within BOUND_TOL of
-    its size in rad/s² or m/s², measured from the torque with Pinocchio (formulation_cases).
-    `premise`: the answer is at a bound, over it by about the tolerance."""
+    its size in rad/s² or m/s², measured from the torque with Pinocchio (formulation_cases)."""
     q, dq, tau_ext = (np.array(v) for v in state)
     result = controller.step(q, dq, tau_ext)
     a = actual_acceleration(robot.model, q, dq, result.tau, tau_ext)
     violation = check_bounds(robot, q, dq, result.tau, a, DT).violation()
-    assert not premise or violation > 1e-7
     assert result.status != 0 or violation <= BOUND_TOL, f"status ok with a bound crossed by {violation:.3g}"
 
 
 def test_a_bound_is_checked_against_its_own_size_not_its_rows():
+    """The Python runtime at PR2_STATE. Its answer was 1.1e-6 of the wrist's bound over it there;
+    since the twist task's error is computed otherwise (tasks/so3.py, 2026-11-29: the QP data moved
+    by 1e-16), it holds the bound to 1.5e-12, as the C's did. The check of such an answer:
+    test_the_bound_check_is_relative_to_the_bound_in_its_units."""
     spec = load_spec_text(PR2_SPEC, "spec.yaml")
     controller = Controller(spec, validate_spec(spec).robot)
-    _ok_only_where_every_bound_holds(controller, controller.robot, PR2_STATE, premise=True)
+    _ok_only_where_every_bound_holds(controller, controller.robot, PR2_STATE)
 
 
 @pytest.mark.skipif(not os.environ.get("DCTS_SLOW"), reason="builds a C bundle (~20 s): set DCTS_SLOW=1 to run it")
 def test_a_bound_is_checked_against_its_own_size_in_c_too(tmp_path, monkeypatch):
-    """The C runtime at PR2_STATE (its answer holds the wrist's bound to 4e-11 there: no premise)."""
+    """The C runtime at PR2_STATE."""
     import dcts_spec
 
     monkeypatch.setenv("DCTS_CACHE_DIR", str(tmp_path / "cache"))
     spec = load_spec_text(PR2_SPEC, "spec.yaml")
     compiled = dcts_spec.compile_c(spec, tmp_path / "bundle")
-    _ok_only_where_every_bound_holds(compiled, validate_spec(spec).robot, PR2_STATE, premise=False)
+    _ok_only_where_every_bound_holds(compiled, validate_spec(spec).robot, PR2_STATE)
 
 
 def test_the_bound_check_is_relative_to_the_bound_in_its_units():

@@ -141,3 +141,25 @@ def test_saturated_law_limits_the_desired_velocity(distance: float):
     assert (v < 1.0) == (distance == 0.3)
     desired = -40 * (J[:3] @ DQ - v * desired_velocity)
     np.testing.assert_allclose(tool_acceleration(result, Q, DQ)[:3], desired, rtol=1e-8, atol=1e-8)
+
+
+@pytest.mark.parametrize("axis", ["rx", "ry", "rz"])
+def test_a_twist_target_half_a_turn_away_is_commanded_as_one_a_hair_off(axis):
+    """The twist ψ = 2 atan2(q_k, q_w) at a half turn (q_w = 0) is read from 4 q_k² and 4 q_w q_k:
+    as 4 q_w q_k / 4 q_w² it was atan2(0, 0) there, its derivative unbounded (QP rows of 1e14, a
+    Panda's step fell back; found from outside). Exactly half a turn away the command is that of a
+    target 1e-7 rad short of it on one side or the other (±π: the same rotation)."""
+    placement, _, _ = tool_state(Q, DQ)
+    k = OWN[axis]
+
+    def command(angle: float) -> np.ndarray:
+        turn = np.zeros(3)
+        turn[k] = angle
+        rpy = pin.rpy.matrixToRpy(placement.rotation @ pin.exp3(np.array([0.2, -0.1, 0.3]) * (turn == 0)) @ pin.exp3(turn))
+        return controller(f"{{name: twist, type: orientation, frame: tool, axes: [{axis}], priority: 1, "
+                          f"gains: {{kp: 30, kd: 8}}, reference: {{rpy: {rpy.tolist()}}}}}").step(Q, DQ).tau
+
+    half = command(np.pi)
+    assert np.isfinite(half).all()
+    sides = [command(np.pi - 1e-7), command(-np.pi + 1e-7)]
+    assert min(np.abs(half - side).max() for side in sides) < 1e-4 * np.abs(sides[0]).max(), (half, sides)

@@ -90,6 +90,15 @@ def orientation_error(rotation: ca.SX, target: ca.SX, axes: tuple[str, ...]) -> 
     k = OWN_AXIS[axes[0]]
     i, j = (k + 1) % 3, (k + 2) % 3
     relative = ca.mtimes(rotation.T, target)
-    # 4 q_w q_k = R_ji − R_ij and 4 q_w² = 1 + tr R: their ratio is tan(ψ/2), whatever q's sign
-    # (1 + tr R ≥ 0, so the angle is in [−π/2, π/2] and ψ in [−π, π])
-    return 2.0 * ca.atan2(relative[j, i] - relative[i, j], 1.0 + relative[0, 0] + relative[1, 1] + relative[2, 2])
+    ww = 1.0 + relative[0, 0] + relative[1, 1] + relative[2, 2]  # 4 q_w²
+    kk = 1.0 + 2.0 * relative[k, k] - (relative[0, 0] + relative[1, 1] + relative[2, 2])  # 4 q_k²
+    wk = relative[j, i] - relative[i, j]  # 4 q_w q_k
+    # tan(ψ/2) = q_k / q_w = 4 q_w q_k / 4 q_w² whatever q's sign (4 q_w² ≥ 0: ψ in [−π, π]); near a
+    # half turn (q_w → 0) that is atan2(0, 0), its derivative unbounded (QP rows of 1e14, the step
+    # fell back: a Panda's [rz] target half a turn from the tool, found from outside), so where
+    # |q_k| > |q_w| the same ratio is read as 4 q_k² / 4 q_w q_k (scaled by q_k: ψ, or ψ + 2π for
+    # q_k < 0, wrapped back). Undefined only where q_k = q_w = 0: a swing of half a turn.
+    by_w = 2.0 * ca.atan2(wk, ww)
+    by_k = 2.0 * ca.atan2(kk, wk)
+    by_k = ca.if_else(by_k > ca.pi, by_k - 2.0 * ca.pi, by_k)
+    return ca.if_else(ww >= kk, by_w, by_k)
