@@ -783,13 +783,13 @@ class Cascade:
 
     def relax(self) -> bool:
         """Widen the bound rows as little as the torque limits allow: one slack σᵣ ≥ 0 per bound,
-        R x + σ ≥ lo and R x − σ ≤ hi, min Σwᵣσᵣ (a linear stage, as the scaling; each σᵣ in its
-        row's scale, the largest |coefficient| of Rᵣ if above 1: the same σ and minimum; with unit
-        slack columns beside bound rows of 1e7, a Panda's joint 1.5 rad beyond its limit after two
-        300 N pushes, DAQP answered the relaxation "optimal, inexact" with torque rows crossed by
-        1 %, and the step fell back: found from outside); w: the
-        structure's slack weights, 1 but on a prismatic joint). The sum, not the
-        sum of squares: a least-squares relaxation spreads the violation, and bounds that could
+        R x + σ ≥ lo and R x − σ ≤ hi, min Σwᵣσᵣ (a linear stage, as the scaling; w: the
+        structure's slack weights, 1 but on a prismatic joint). Each σᵣ is solved for in its row's
+        scale, σᵣ = sᵣσ̃ᵣ with sᵣ the largest |coefficient| of Rᵣ if above 1 (the same σ, the same
+        minimum): with unit slack columns beside bound rows of 1e7 (a Panda's joint 1.5 rad beyond
+        its limit after two 300 N pushes; found from outside) DAQP answered every QP of the
+        relaxation "optimal, inexact", torque rows crossed by 1 %, and the step fell back. The
+        sum, not the sum of squares: a least-squares relaxation spreads the violation, and bounds that could
         hold gave way a little to spare the one that cannot (a joint at rest pushed 1.65 % beyond
         its bound to gain 6e-5 on another). Each bound that gave way is then widened to what was
         achieved, plus RELAX_MARGIN (the next stages must not be left a degenerate feasible set)."""

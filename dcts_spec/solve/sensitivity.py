@@ -130,7 +130,14 @@ def run_workers(shares: list[list[tuple[AnswerData, int, float]]]) -> list[list[
     payloads = [pickle.dumps(share) for share in shares]
     with ThreadPoolExecutor(len(processes)) as pool:  # (each pipe fed and drained at once: no deadlock)
         outputs = list(pool.map(_communicate, processes, payloads))
-    return [None if out is None else pickle.loads(out) for out in outputs]
+    return [_unpickled(out) for out in outputs]
+
+
+def _unpickled(out: bytes | None) -> list[np.ndarray] | None:
+    try:
+        return None if out is None else pickle.loads(out)
+    except (pickle.UnpicklingError, EOFError, ValueError):
+        return None
 
 
 def _communicate(process: subprocess.Popen | None, payload: bytes) -> bytes | None:
