@@ -822,7 +822,7 @@ def test_compiling_again_keeps_the_files_a_user_added_to_the_bundle(tmp_path):
     (other / "minimal.o").write_text("")
     (other / "asan" / "minimal_test.o").write_text("")
     (out / "libminimal.so").write_text("")
-    compile_bundle(MINIMAL, out)
+    compile_bundle(MINIMAL, out, golden_count=24)
     assert not other.exists() and (out / "libminimal.so").stat().st_size > 0
     # (a user's notes in build/ and a board's image in firmware/ matched the make products'
     # patterns build/* and firmware/*.elf, and were deleted: found from outside)
@@ -1281,6 +1281,7 @@ def test_workspaces_step_in_parallel_threads(built, tmp_path):
     assert f"0 of {4 * json.loads((out / 'manifest.json').read_text())['golden']['count']} steps differ" in done.stdout
 
 
+@pytest.mark.slow  # (a second compiler on a copy of the bundle the default tier builds with gcc -Werror)
 @pytest.mark.skipif(shutil.which("clang") is None, reason="clang not installed")
 def test_clang_werror(built, tmp_path):
     copy = _fresh_copy(built[0], tmp_path)

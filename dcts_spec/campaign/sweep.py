@@ -13,7 +13,6 @@ from typing import Any, Literal
 import numpy as np
 
 from ..codegen.cache import default_cache_dir
-from ..codegen.loader import CompiledController
 from ..phases import phase
 from ..spec import load_spec
 from ..spec.errors import Diagnostic, SpecError, did_you_mean
@@ -91,10 +90,10 @@ class CampaignSession:
         self.folder.check()
         if options.engine == "ray" and options.address:  # (before anything is built or written)
             check_address(options.address)
+        self.parameter_units = check_parameters(self.driver)  # (before the build: a refusal at once)
         phase(f"building the C controller{'s' if len(self._bundles()) > 1 else ''} (once)")
         for formulation, mass_scale in self._bundles():
             self.driver.bundle(formulation, mass_scale)
-        self.parameter_units = check_parameters(self.driver)
         if check is not None:  # (the caller's own check of the inputs: an optimization's search space)
             check(self)
         self.rows = self.folder.open(self.driver.sampler.count)  # (only now: a refused campaign leaves no folder)
@@ -262,15 +261,14 @@ def check_campaign(driver: SampleRunner) -> None:
 
 
 def check_parameters(driver: SampleRunner) -> dict[str, str]:
-    """The swept run-time parameters exist in the compiled controller and their values stay in
-    its ranges (checked on the built bundle, which knows them); returns their units."""
+    """The swept run-time parameters exist in the spec's controller and their values stay in
+    its ranges (its parameter layout, the compiled bundle's too, from the symbolic problem: a
+    campaign refused before the C build); returns their units."""
     controller = driver.campaign.controller
     if controller is None or not controller.parameters:
         return {}
     src = driver.campaign.source
-    bundle = CompiledController(driver.bundle(driver.sampler.formulations[0], 1.0))
-    layout = bundle.param_layout
-    bundle.close()
+    layout = driver.problem.param_layout
     known = [e.name for e in layout.entries]
     diagnostics = []
     for name, value in controller.parameters.items():
