@@ -1241,10 +1241,10 @@ PANDA_DAMPING_STATE = (
 
 @pytest.mark.skipif(not os.environ.get("DCTS_SLOW"), reason="builds a C bundle (~10 s): set DCTS_SLOW=1 to run it")
 def test_the_damping_below_a_scaled_level_is_at_its_optimum_in_c(tmp_path, monkeypatch):
-    """The C runtime at the state of test_lexicographic.py's
-    test_the_weighted_qps_scaling_is_finished_without_its_weight: its q̈ is the Python runtime's
-    with the damping's closed-form optimum over the direction the levels leave (ctl_final_at_scaling;
-    before, both runtimes were 1.1e-4 rad/s² from it)."""
+    """The C runtime at the state of test_optimality.py's
+    test_an_answer_off_its_minimum_along_a_flat_direction_is_polished: its q̈ is the Python
+    runtime's with the damping's closed-form optimum over the direction the levels leave
+    (ctl_polished; before, both runtimes were 1.1e-4 rad/s² from it)."""
     monkeypatch.setenv("DCTS_CACHE_DIR", str(tmp_path / "cache"))
     spec = load_spec_text(PANDA_DAMPING_SPEC, "spec.yaml")
     controller = dcts_spec.build_controller(spec)

@@ -767,8 +767,9 @@ def test_a_payload_the_controller_models_does_not_make_the_loop_oscillate():
     the controller (a scenario payload), it reaches it only through τ_ext, one step late, and that
     carries the payload's reaction to the previous step's acceleration: the torque oscillates with a
     period of a few steps (72 steps with a jump above 10 % of a limit in 2.5 s, the floor crossed by
-    3e-6 m with status "ok"). Declared in `robot.payloads`, it is in the controller's model and the
-    plant alike: 2 such steps (the start), the floor held to 4e-9 m."""
+    3e-6 m with status "ok"; 29 and 1.4e-6 m since the answers are polished on their active face,
+    224 and 56 relaxed steps just before). Declared in `robot.payloads`, it is in the controller's
+    model and the plant alike: 2 such steps (the start), the floor held to 4e-9 m."""
     from dcts_spec.robot.builtin import example_robot_data_dir
 
     tool = "{frame: tool0, mass: 6.0, com: [0, 0, 0.05]}"
@@ -779,7 +780,7 @@ def test_a_payload_the_controller_models_does_not_make_the_loop_oscillate():
                                          scenario_payload="" if known else f"  payloads: [{tool}]\n")
         sim, log = simulate(text)
         summaries[known] = analyze(sim, log).summary
-    assert summaries[False]["torque_jump_steps"] >= 30
+    assert summaries[False]["torque_jump_steps"] >= 20  # (the premise: unknown, it oscillates)
     assert summaries[True]["torque_jump_steps"] <= 5 and summaries[True]["max_cartesian_violation"] < 1e-7
     assert summaries[True]["limits_relaxed"] == 0 and summaries[True]["crossed_after_ok_steps"] == 0
 

@@ -750,6 +750,7 @@ def generate_sources(
         "OPT_ALIGNED": c_double(optimality.ALIGNED),
         "POLISH_STEPS": optimality.POLISH_STEPS,
         "SMALL_STEP": c_double(optimality.SMALL_STEP),
+        "POLISH_ROUNDING": c_double(optimality.POLISH_ROUNDING),
         "FINISH_WEIGHTS": ", ".join(c_double(w) for w in lexicographic.FINISH_WEIGHTS),
         "MAX_STAGE_SOLVES": lexicographic.PROXIMAL_ITERATIONS,
         "VELOCITY_CAP": f"{fallback.VELOCITY_CAP:g}",

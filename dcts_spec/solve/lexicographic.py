@@ -515,12 +515,12 @@ class Cascade:
             if x[s] >= ubx[s]:
                 return x
             if stationary(*self._last_qp, -np.eye(1, x.size, s)[0]):
-                return self._final_at_scaling(x, lbx, ubx)
+                return x
             linear = -(self.H @ x)
             linear[s] -= weight
             moved = self._solve(self.H, linear, lbx, ubx, feasible=True)
             if moved is not None and self._negligible(moved - x, x):
-                return self._final_at_scaling(x, lbx, ubx)
+                return x
             checked = x
         if checked is None:  # infeasible, or with a witness, DAQP failed
             return None if witness is None else self._scale_and_final(lbx, ubx, witness)
@@ -546,19 +546,6 @@ class Cascade:
         elif (finished and scaled[s] < ubx[s]
               and self._negligible(np.maximum(scaled[s:s + 1] - witness[s:s + 1], 0.0), witness)):
             return witness
-        return self._final_at_scaling(scaled, lbx, ubx)
-
-    def _final_at_scaling(self, scaled: np.ndarray, lbx, ubx) -> np.ndarray:
-        """½xᵀHx + fᵀx with the lowest level's scaling at `scaled`'s (a feasible point: the last
-        QP's answer), the rows that QP certifies active at that scaling held; `scaled` itself if
-        DAQP fails it. After `finish_lowest`'s weighted QP too, whose answer has the largest s but
-        carries K's rounding in the other variables: DAQP's x is R⁻¹(u − v) with v ~ K/√H, and a
-        Panda's least-squares posture ended 1.1e-4 rad/s² (4.6e-6 of the level, relative) from its
-        optimum along the one direction left to it (found from outside against the independent
-        reference: 5 of 5,400 states beyond 1e-6; 1e-10 typical). Where s reached 1, K's rounding
-        was below 1e-10 in every state measured, and the common step stays one QP."""
-        level = len(self.structure.priorities) - 1
-        s, _ = self.structure.priorities[level]
         lo, hi = lbx.copy(), ubx.copy()
         lo[s] = hi[s] = min(max(scaled[s], lbx[s]), ubx[s])
         if self.structure.spare_variables and self._nominal_through(level + 1, lo, hi):
