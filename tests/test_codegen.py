@@ -483,7 +483,7 @@ def test_an_ignored_tau_ext_is_not_read(tmp_path):
     spec = tmp_path / "ignored.yaml"
     spec.write_text(MINIMAL.read_text().replace("name: minimal", "name: ignored").replace(
         "tasks:\n", "controller: {external_torque: ignored}\ntasks:\n", 1))
-    compiled = compile_c(spec, tmp_path / "bundle")
+    compiled = compile_c(spec, tmp_path / "bundle", golden_count=24)  # (NaN handling is the point)
     controller = build_controller(spec)
     broken = np.full(7, np.nan)
     for seed in range(5):
@@ -778,15 +778,15 @@ def test_broken_spec_leaves_nothing(tmp_path):
 
 def test_failing_build_leaves_nothing_and_keeps_the_old_bundle(tmp_path):
     out = tmp_path / "bundle"
-    compile_bundle(MINIMAL, out, build=False)
+    compile_bundle(MINIMAL, out, build=False, golden_count=24)  # (the files are the point: few vectors)
     before = (out / "manifest.json").read_text()
     with pytest.raises(CodegenError, match="host build failed"):
-        compile_bundle(MINIMAL, out, cc="false")  # the compiler fails
+        compile_bundle(MINIMAL, out, cc="false", golden_count=24)  # the compiler fails
     assert (out / "manifest.json").read_text() == before
     assert sorted(p.name for p in tmp_path.iterdir()) == ["bundle"]  # no temporary directory left
     fresh = tmp_path / "new" / "deeper"
     with pytest.raises(CodegenError):
-        compile_bundle(MINIMAL, fresh, cc="false")
+        compile_bundle(MINIMAL, fresh, cc="false", golden_count=24)
     assert not (tmp_path / "new").exists()  # parents created for it are removed too
 
 
@@ -809,10 +809,10 @@ def test_invalid_output_paths(tmp_path):
 
 def test_compiling_again_keeps_the_files_a_user_added_to_the_bundle(tmp_path):
     out = tmp_path / "bundle"
-    compile_bundle(MINIMAL, out, build=False)
+    compile_bundle(MINIMAL, out, build=False, golden_count=24)  # (the files are the point: few vectors)
     (out / "my_main.c").write_text("int main(void) { return 0; }\n")
     (out / "minimal.h").write_text("stale")
-    compile_bundle(MINIMAL, out, build=False)
+    compile_bundle(MINIMAL, out, build=False, golden_count=24)
     assert (out / "my_main.c").read_text().startswith("int main")
     assert "stale" not in (out / "minimal.h").read_text()  # dcts' own file is replaced
     # what the bundle's `make` built since (here by hand: another compiler's configuration) a
@@ -831,7 +831,7 @@ def test_compiling_again_keeps_the_files_a_user_added_to_the_bundle(tmp_path):
         (out / path).parent.mkdir(parents=True, exist_ok=True)
         (out / path).write_text("mine")
     with pytest.raises(CodegenError, match="nothing was changed") as refused:
-        compile_bundle(MINIMAL, out, build=False)
+        compile_bundle(MINIMAL, out, build=False, golden_count=24)
     assert all(path in str(refused.value) for path in mine), str(refused.value)
     assert all((out / path).read_text() == "mine" for path in mine) and (out / "my_main.c").is_file()
 
