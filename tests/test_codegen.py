@@ -1741,14 +1741,7 @@ tasks:
 
 # Specs whose golden test fails today, each for a reason stated (strict: one that passes again fails
 # the test, to be moved back among the passing ones)
-OPEN_MISMATCHES = {
-    "tiago_arm_a_bend_that_rose": "vector 115, a relaxed sliver where C's bend stage and Python's end at "
-                                  "different splits of the twist (torques within 4e-5 Nm): Python's is the least "
-                                  "bend (HiGHS on the same stage set: 101.0); C's (0.14) crosses arm_3's joint bound "
-                                  "row, whose coefficients on the twist are 2e-6 and 2e-7, by 7e-6, within the row "
-                                  "check's tolerance: passed with the ascent check alone, fails again since the twist's "
-                                  "formula changed the QP data by 1e-16",
-}
+OPEN_MISMATCHES: dict[str, str] = {}
 
 
 @EXTENDED

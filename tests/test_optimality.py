@@ -128,29 +128,29 @@ def test_a_point_moved_off_a_well_posed_optimum_comes_back_to_it():
 def test_an_answer_off_its_minimum_along_a_flat_direction_is_polished():
     """A Panda (a 5-axis pose, joint 3, joint damping over every joint in least squares: one
     direction left to the damping), joint 3's level scaled by its velocity limit (found from
-    outside against the independent reference). The cascade's answer comes from finish_lowest's
+    outside against the independent reference). The cascade's answer came from finish_lowest's
     weighted QP (min ½xᵀHx + fᵀx − K s, K ~1e6 × the data), whose rounding left the damping
-    1.1e-4 rad/s² from its minimum along that direction (4.6e-6 of the level, relative) in both
-    runtimes: its gradient passed the check (7e-8 of the scale, within OPTIMALITY_TOLERANCE).
-    Polished (one Newton step on the active face), it is the minimizer in closed form: with the
-    levels' variables as solved, the rest minimizes the objective (no row it moves is active)."""
+    1.1e-4 rad/s² from its minimum along that direction (4.6e-6 of the level, relative), in both
+    runtimes: an answer whose gradient passes the check (7e-8 of the scale, within
+    OPTIMALITY_TOLERANCE). Such an answer (the minimizer moved by that much along the direction,
+    the levels' variables as solved) is polished to the minimizer (one Newton step on its face)."""
     from saved_qp import saved_acceleration_map
 
     args, structure = saved_qp("least_squares_after_the_weighted_qp")
     Q = saved_acceleration_map("least_squares_after_the_weighted_qp")
     H, f, A, lbx, ubx, lba, uba = args
     answer = solve_lexicographic(*args, structure, Q)
-    s_lowest = structure.priorities[-1][0]
-    assert 0.0 < answer[s_lowest] < ubx[s_lowest], "the premise: the lowest scaled level gives way"
     levels = structure.levels_above[-1]
     free = np.setdiff1d(np.arange(answer.size), levels)
-    y = answer.copy()
+    y = answer.copy()  # with the levels' variables as solved, the rest minimizes the objective
     y[free] = -np.linalg.solve(H[np.ix_(free, free)], f[free] + H[np.ix_(free, levels)] @ answer[levels])
     seen = np.abs(A[:, free]).max(axis=1) > 1e-12 * np.abs(A).max(axis=1)  # (the others are fixed with the levels)
     margin = np.minimum(A @ y - lba, uba - A @ y)[seen]
-    assert seen.any() and margin.min() > 1e-3, "the premise: the minimizer is inside every row it moves"
-    assert np.linalg.norm(Q @ (answer - y)) > 1e-5, "the premise: the cascade's answer is off it"
-    x, certified = to_optimum(*args, answer, structure)
+    assert free.size == 1 and margin.min() > 1e-3, "the premise: one direction, its minimizer inside every row it moves"
+    off = y.copy()
+    off[free] += 1.1e-4 / np.linalg.norm(Q[:, free])  # (1.1e-4 rad/s² along it, as the weighted QP left it)
+    assert final_optimal(*args, off, structure), "the premise: the gradient's check passes it"
+    x, certified = to_optimum(*args, off, structure)
     assert certified and np.linalg.norm(Q @ (x - y)) <= 1e-9 * (1.0 + np.linalg.norm(Q @ y))
 
 

@@ -1244,7 +1244,8 @@ def test_the_damping_below_a_scaled_level_is_at_its_optimum_in_c(tmp_path, monke
     """The C runtime at the state of test_optimality.py's
     test_an_answer_off_its_minimum_along_a_flat_direction_is_polished: its q̈ is the Python
     runtime's with the damping's closed-form optimum over the direction the levels leave
-    (ctl_polished; before, both runtimes were 1.1e-4 rad/s² from it)."""
+    (ctl_polished; before, both runtimes were 1.1e-4 rad/s² from it; since held rows nearly
+    dependent are dropped, INDEPENDENT_ROW, the cascade reaches it there by itself)."""
     monkeypatch.setenv("DCTS_CACHE_DIR", str(tmp_path / "cache"))
     spec = load_spec_text(PANDA_DAMPING_SPEC, "spec.yaml")
     controller = dcts_spec.build_controller(spec)
