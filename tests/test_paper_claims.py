@@ -142,6 +142,7 @@ def test_exp2_push(in_tmp):
     assert m["dcts"]["angle_held_push_end_deg"] == pytest.approx(m["osc"]["angle_held_push_end_deg"], abs=0.5)
 
 
+@pytest.mark.slow  # (scripts/reproduce_paper.py checks the same claims)
 def test_exp3_octagon_at_the_stated_speed(in_tmp):
     """At 0.85 m/s (first three points) the torque limits bind: DCTS scales only then and keeps every
     limit, the baseline (with its 20 rad/s² acceleration limit) follows the path, and Table II's
@@ -157,6 +158,7 @@ def test_exp3_octagon_at_the_stated_speed(in_tmp):
     assert m["dcts"]["position_error"] > 50 * m["dcts"]["path_error"]
 
 
+@pytest.mark.slow  # (scripts/reproduce_paper.py checks the same claims)
 def test_exp3_baseline_needs_its_acceleration_limit(in_tmp):
     """With Table I's limits only, the baseline's clipped torques blow up a velocity limit at the first
     vertex, and with 40 rad/s² too (since the simulated τ_ext sensor takes the period's midpoint:
