@@ -7,7 +7,6 @@ module (2 CPUs, no dashboard), to stay within the suite's time."""
 from __future__ import annotations
 
 import json
-import os
 import shlex
 import shutil
 import signal
@@ -354,8 +353,8 @@ def test_an_interrupted_campaign_resumes_where_it_stopped(spec_file, campaign_fi
     assert all(_without_timing(rows[i]) == _without_timing(reference[i]) for i in rows)
 
 
-@pytest.mark.parametrize("engine", ["serial", pytest.param("ray", marks=pytest.mark.skipif(
-    not os.environ.get("DCTS_SLOW"), reason="a Ray session in a subprocess (~15 s): set DCTS_SLOW=1 to run it"))])
+@pytest.mark.slow  # (the default tier resumes an interrupted one: test_an_interrupted_campaign_resumes_where_it_stopped)
+@pytest.mark.parametrize("engine", ["serial", "ray"])
 def test_a_killed_campaign_resumes(spec_file, tmp_path, engine) -> None:
     """SIGTERM in the middle of a campaign (a cluster job's end): the finished samples stay, the
     command exits with 143, and the same command runs the others only. (With Ray, its core
@@ -506,6 +505,7 @@ def test_a_campaigns_folder_keeps_its_samples_and_the_users_files(spec_file, cam
         Path(w["replay"]).name for w in resumed.report["worst_cases"]}  # (the earlier worst cases' replaced)
 
 
+@pytest.mark.slow  # (an older dcts's folder; the default tier resumes the current one's)
 def test_a_campaign_folder_of_an_older_dcts_resumes(spec_file, campaign_file, tmp_path) -> None:
     """Its .dcts-owned is a plain list of names: its report files count as dcts's (the first
     version of the report's staging refused them as a user's, and the campaign never finished)."""
