@@ -8,7 +8,6 @@ SampleRunner that keeps its loaded spec and bundles between samples.
 from __future__ import annotations
 
 import logging
-import os
 import signal
 import socket
 import threading
@@ -19,6 +18,7 @@ from dataclasses import dataclass
 from typing import Any, Protocol
 
 from ..files import stop_signal
+from ..solve.sensitivity import available_cpus
 from .runner import CampaignInputs, SampleRunner
 
 IN_FLIGHT = 2  # samples queued per Ray worker: it never waits for the driver between samples
@@ -173,7 +173,7 @@ def ray_session(address: str | None = None, cpus: int | None = None, quiet: bool
         return
     options: dict[str, Any] = {"include_dashboard": False, "log_to_driver": False, "configure_logging": False}
     if address is None:
-        options["num_cpus"] = cpus or os.cpu_count() or 1
+        options["num_cpus"] = cpus or available_cpus()
     handlers = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
     ray_logger = logging.getLogger("ray")
     level = ray_logger.level

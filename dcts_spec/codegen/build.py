@@ -23,6 +23,7 @@ from functools import lru_cache
 from pathlib import Path
 
 from ..choices import TARGETS
+from ..solve.sensitivity import available_cpus
 from ..files import OutputFolderError, check_writable, install, mark_staging, remove_stale_staging
 from ..phases import building_controller, phase
 from ..controller import Controller
@@ -116,7 +117,7 @@ def daqp_sources(cache: Path | None = None, version: str = DAQP_VERSION) -> Path
 
 
 def _make_command(directory: Path, targets: list[str], variables: dict[str, str] | None) -> list[str]:
-    command = ["make", "-C", str(directory), f"-j{min(os.cpu_count() or 1, 8)}", *targets]
+    command = ["make", "-C", str(directory), f"-j{min(available_cpus(), 8)}", *targets]
     return command + [f"{k}={v}" for k, v in (variables or {}).items()]
 
 
