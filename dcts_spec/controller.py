@@ -95,6 +95,10 @@ class StepResult:
     # status "ok" with a QP: is the lowest level's objective (½xᵀHx + fᵀx) at its optimum given
     # the levels above, checked at x (solve/optimality.py)? None where not checked
     optimal: bool | None = None
+    # is the answer the relaxation's own point (the least violation the torque limits allow), DAQP
+    # having failed the levels' stages on the relaxed bounds (status "limits relaxed")? Such an
+    # answer holds every bound as far as it can, its levels only as that point happens to
+    from_relaxation: bool = False
 
     @property
     def ok(self) -> bool:
@@ -222,6 +226,7 @@ class Controller:
         self._torque_params = np.array([i for i in self.param_layout.torque_index if i >= 0], dtype=int)
         self._last_q: np.ndarray | None = None
         self._hint: Hint | None = None  # where the last solve gave way (as the C runtime's hint_first)
+        self._from_relaxation = False  # was the last answer the relaxation's own point (solve_hinted)
         # (else tau_ext is not read: zero, whatever the sensor gives; the C runtime the same)
         self.reads_tau_ext = spec.controller.external_torque == "measured"
         qp = self.law.qp
@@ -301,6 +306,7 @@ class Controller:
         solve gave way), as the C runtime's reset; the parameter set and its ramp are kept."""
         self._last_q = None
         self._hint = None
+        self._from_relaxation = False
 
     def reset_params(self) -> None:
         """Back to the compiled values at once (no ramp), as a freshly initialized controller."""
@@ -324,7 +330,7 @@ class Controller:
     def _solve(self, data: dict[str, np.ndarray]) -> np.ndarray | None:
         """The lexicographic solution at the data (None if DAQP failed), its cascade started where
         the last step's gave way (`solve.Hint`: fewer QPs, the same answer)."""
-        x, self._hint = solve_hinted(*self._qp(data), self._structure, data["Q"], self._hint)
+        x, self._hint, self._from_relaxation = solve_hinted(*self._qp(data), self._structure, data["Q"], self._hint)
         return x
 
     def answer_data(self, q, dq, tau_ext, ref, x: np.ndarray) -> AnswerData | None:
@@ -476,7 +482,8 @@ class Controller:
         scaling = np.minimum(np.maximum(data["s0"].ravel() + data["S"] @ x, 0.0), 1.0)
         if self.law.least_squares_task is not None:
             scaling[-1] = self._least_squares_scaling(data, x)
-        return StepResult(np.minimum(np.maximum(tau, -tau_max), tau_max), ddq, scaling, status, x, relaxed, optimal)
+        return StepResult(np.minimum(np.maximum(tau, -tau_max), tau_max), ddq, scaling, status, x, relaxed, optimal,
+                          bool(self.nx) and self._from_relaxation)
 
 
 def build_controller(spec: Spec | str | Path, formulation: str | None = None) -> Controller:

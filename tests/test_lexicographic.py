@@ -1175,12 +1175,12 @@ def test_the_answer_does_not_depend_on_the_hint(robot, levels, monkeypatch):
         data = c.evaluate_data(st.q, st.dq, st.tau_ext)
         args = (*c._qp(data), c._structure, data["Q"])
         solves.clear()
-        x, own = solve_hinted(*args, None)
+        x, own, _ = solve_hinted(*args, None)
         cold = len(solves)
         out = _hints(len(c._structure.priorities), own)
         for hint in out:
             solves.clear()
-            y, again = solve_hinted(*args, hint)
+            y, again, _ = solve_hinted(*args, hint)
             assert (x is None) == (y is None)
             if x is None:
                 continue
@@ -1562,7 +1562,7 @@ def test_the_stages_after_a_relaxation_hold_a_torque_row_dropped_as_dependent():
     without one."""
     name = "relaxed_stages_cross_a_dropped_torque_row"
     args, structure = saved_qp(name)
-    x, _ = solve_hinted(*args, structure, saved_acceleration_map(name), None)
+    x, _, _ = solve_hinted(*args, structure, saved_acceleration_map(name), None)
     A, lba, uba = args[2], args[5], args[6]
     hard = np.setdiff1d(np.arange(A.shape[0]), np.array(structure.bound_rows))  # (the torque rows)
     excess = np.maximum(lba[hard] - A[hard] @ x, A[hard] @ x - uba[hard]) / np.maximum(1.0, np.abs(uba[hard]))

@@ -344,6 +344,11 @@ class Golden:
     # (Controller.status_determined); the test then accepts either, and compares the rest only
     # where the status is the same
     status_determined: np.ndarray
+    # per vector: is the Python runtime's answer the relaxation's own point (StepResult.from_relaxation)?
+    # Compared on status and torque limits only, as is a vector the C answers so: one runtime's DAQP
+    # failed every stage on the relaxed sliver and the other's did not (docs/formulations.md, "A
+    # relaxation's own point as the answer")
+    from_relaxation: np.ndarray
 
     @property
     def determined(self) -> np.ndarray:
@@ -393,13 +398,14 @@ def compute_golden(controller: Controller, states: list[State]) -> Golden:
     scaling, x = np.zeros((count, levels)), np.zeros((count, max(nx, 1)))
     nxs, status = np.zeros(count, dtype=int), np.zeros(count, dtype=int)
     spread, limit = np.zeros((count, 2)), np.zeros(count)  # limit: the spread a determined answer may have
-    status_determined = np.ones(count, dtype=bool)
+    status_determined, from_relaxation = np.ones(count, dtype=bool), np.zeros(count, dtype=bool)
     answers: dict[int, AnswerData] = {}
     start = time.perf_counter()
     for k, s, ref, r in _replay(controller, states):
         tau[k], ddq[k], scaling[k], status[k] = r.tau, r.ddq, r.scaling, r.status
         nxs[k] = r.x.size
         x[k, : r.x.size] = r.x
+        from_relaxation[k] = r.from_relaxation
         if r.status >= 0:
             limit[k] = _spread_limit(controller, r)
             answer = controller.answer_data(s.q, s.dq, s.tau_ext, ref, r.x)
@@ -409,7 +415,8 @@ def compute_golden(controller: Controller, states: list[State]) -> Golden:
     workers = available_cpus() if time.perf_counter() - start >= PARALLEL_SPREADS_FROM else 1
     for k, value in zip(answers, spreads(list(answers.values()), SPREAD_SAMPLES, limit[list(answers)], workers)):
         spread[k] = value
-    return Golden(states, tau, ddq, scaling, x, nxs, status, spread, _compared(spread, limit), status_determined)
+    compared = np.where(from_relaxation, COMPARED_STATUS, _compared(spread, limit))
+    return Golden(states, tau, ddq, scaling, x, nxs, status, spread, compared, status_determined, from_relaxation)
 
 
 def _compared(spread: np.ndarray, limit: np.ndarray) -> np.ndarray:
@@ -535,7 +542,8 @@ def golden_json(golden: Golden) -> dict:
                  "of the test's tolerance, command_determined: the command's (the test compares what is "
                  "determined, else status and torque limits only), status_determined: whether rounding "
                  "could give the other of \"ok\" and \"limits relaxed\" (a bound row's check at its "
-                 "tolerance; if not, either is accepted)"),
+                 "tolerance; if not, either is accepted), from_relaxation: whether the answer is the "
+                 "relaxation's own point (compared on status and torque limits only)"),
         "vectors": [
             {
                 "kind": s.kind,
@@ -548,6 +556,7 @@ def golden_json(golden: Golden) -> dict:
                 "determined": bool(golden.determined[k]),
                 "command_determined": bool(golden.compared[k] >= COMPARED_COMMAND),
                 "status_determined": bool(golden.status_determined[k]),
+                "from_relaxation": bool(golden.from_relaxation[k]),
             }
             for k, s in enumerate(golden.states)
         ],
@@ -897,4 +906,6 @@ def _golden_comparisons(golden: Golden) -> dict:
         "compared_on_command": [int(k) for k in np.flatnonzero(golden.compared == COMPARED_COMMAND)],
         # and those whose status ("ok" or "limits relaxed") rounding decides
         "status_undetermined": [int(k) for k in np.flatnonzero(~golden.status_determined)],
+        # those whose answer is the relaxation's own point (compared on status and torque limits)
+        "from_relaxation": [int(k) for k in np.flatnonzero(golden.from_relaxation)],
     }

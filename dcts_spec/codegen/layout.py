@@ -86,6 +86,7 @@ def info_struct(nq: int, nlevels: int, nx: int, nr: int) -> type[ctypes.Structur
             ("iterations", ctypes.c_int),
             ("exitflag", ctypes.c_int),
             ("optimal", ctypes.c_int),
+            ("from_relaxation", ctypes.c_int),
         ]
 
     return Info

@@ -225,7 +225,8 @@ class CompiledController:
         The arrays of the result are new (later steps do not change them)."""
         status = self._call(q, dq, tau_ext, ref)
         return StepResult(self._tau.copy(), self._ddq_out.copy(), self._scaling_out.copy(), int(status),
-                          self._solution(status), self.last_relaxed(), self.last_optimal())
+                          self._solution(status), self.last_relaxed(), self.last_optimal(),
+                          bool(self._info.from_relaxation))
 
     def fallback_torque(self, q, dq) -> np.ndarray:
         """The C fallback torque at (q, dq) alone (`Controller.fallback_torque`, at the parameters

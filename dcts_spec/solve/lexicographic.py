@@ -849,9 +849,10 @@ def solve_lexicographic(H, f, A, lbx, ubx, lba, uba, structure: Structure,
 
 
 def solve_hinted(H, f, A, lbx, ubx, lba, uba, structure: Structure, acceleration_map: np.ndarray | None,
-                 hint: Hint | None) -> tuple[np.ndarray | None, Hint | None]:
+                 hint: Hint | None) -> tuple[np.ndarray | None, Hint | None, bool]:
     """`solve_lexicographic` starting where the last step gave way (`hint`), and where this one did
-    (steady if that is where the last one did too)."""
+    (steady if that is where the last one did too), and whether the answer is the relaxation's
+    own point: DAQP failed the levels' stages on the relaxed bounds (`Cascade.relax`)."""
     cascade = Cascade(H, f, A, lbx, ubx, lba, uba, structure, acceleration_map)
     x = cascade.levels(hint)
     relaxed = x is None and cascade.relax()
@@ -869,8 +870,8 @@ def solve_hinted(H, f, A, lbx, ubx, lba, uba, structure: Structure, acceleration
                 cascade, x = again, y
     if x is None and relaxed:
         # (the relaxation's own point meets the widened bounds: better than no answer, if DAQP fails)
-        return cascade.relaxed_point, None
+        return cascade.relaxed_point, None, True
     new = None if x is None else cascade.hint(x)
     if new is not None and hint is not None and (new.first, new.bent) == (hint.first, hint.bent):
         new = Hint(new.first, new.bent, True)
-    return x, new
+    return x, new, False
