@@ -1690,10 +1690,81 @@ def test_a_bend_stage_on_nearly_dependent_held_rows_reaches_the_least_bend(monke
 
     monkeypatch.setattr(Cascade, "bend", recorded)
     assert build_controller(spec).step(*XARM_BEND_STATE).status == 0
-    (delta, A, lba, uba, lbx, ubx, answer), = [s for s in stages if s[-1] is not None]
-    delta = list(delta)
-    Q = np.zeros((lbx.size, lbx.size))
-    Q[delta, delta] = 1.0
-    least, status = solve_highs(np.zeros(lbx.size), A, lba, uba, lbx, ubx, Q=Q)
-    assert least is not None, status
-    assert abs(np.linalg.norm(answer[delta]) - np.linalg.norm(least[delta])) <= 1e-7 * np.linalg.norm(least[delta])
+    answered = [s for s in stages if s[-1] is not None]
+    assert answered
+    for k, (delta, A, lba, uba, lbx, ubx, answer) in enumerate(answered):
+        delta = list(delta)
+        Q = np.zeros((lbx.size, lbx.size))
+        Q[delta, delta] = 1.0
+        least, status = solve_highs(np.zeros(lbx.size), A, lba, uba, lbx, ubx, Q=Q)
+        assert least is not None, status
+        bent, least_bend = np.linalg.norm(answer[delta]), np.linalg.norm(least[delta])
+        assert bent <= least_bend * (1.0 + 1e-7)
+        if k == 0:  # (level 2's, the one that stalled: the least to 1e-7 either way)
+            assert abs(bent - least_bend) <= 1e-7 * least_bend
+
+
+PANDA_SUBSET_TOP = """version: 1
+name: panda_subset_top
+robot: {model: panda}
+limits:
+  joint_velocity: {max: 1.5}
+  joint_acceleration: {max: [6, 6, 8, 8, 12, 12, 12]}
+  cartesian:
+    - {frame: panda_hand_tcp, axis: z, min: 0.441039, max_acceleration: 3.0}
+controller: {formulation: dcts, external_torque: measured}
+tasks:
+  - {name: j13, type: joint, joints: [panda_joint1, panda_joint3], priority: 1, gains: {kp: 40, kd: 12}, reference: {q: [0.5, -0.4]}}
+  - {name: reach, type: position, frame: panda_hand_tcp, priority: 2, gains: {kp: 100, kd: 20}, reference: {position: [0.535425, 0.08, 0.371039]}}
+LEVEL3
+  - {name: damping, type: joint, priority: 4, gains: {kp: 0, kd: 5}}
+"""
+TILT_AND_J5 = """  - {name: tilt, type: orientation, frame: panda_hand_tcp, axes: [rx], priority: 3, gains: {kp: 40, kd: 12}, reference: {rpy: [-2.83887, -0.0911756, -0.0436439]}}
+  - {name: j5, type: joint, joints: [panda_joint5], priority: 3, gains: {kp: 20, kd: 8}, reference: {q: [0.4]}}"""
+J5 = """  - {name: j5, type: joint, joints: [panda_joint5], priority: 3, gains: {kp: 20, kd: 8}, reference: {q: [0.4]}}"""
+
+
+def _levels_against_the_reference(spec_text_: str, q, dq, tau_ext, levels: int) -> tuple[list[float], list[float]]:
+    """The largest relative error of each of the first `levels` levels' achieved task acceleration
+    (dcts's step, Pinocchio's forward dynamics) against the reference's, and dcts's scalings."""
+    c = build_controller(load_spec_text(spec_text_))
+    r = c.step(q, dq, tau_ext)
+    assert r.status == 0
+    ref = lexicographic_solution(c.robot, numeric_tasks(c.spec, c.robot.joint_names), q, dq, tau_ext, DT)
+    a = actual_acceleration(c.robot.model, q, dq, r.tau, tau_ext)
+    errors = [float(np.max(np.abs(lv.J @ a + lv.bias - x)) / max(1.0, float(np.max(np.abs(x)))))
+              for lv, x in zip(ref.levels[:levels], ref.achieved)]
+    return errors, list(r.scaling[:levels])
+
+
+def test_rows_held_after_a_scaling_are_the_ones_its_multipliers_certify_beyond_rounding():
+    """A Panda (joints 1 and 3 @1, the hand's position @2, [rx] and joint 5 @3, damping @4), found
+    from outside against the reference: level 1 is scaled to 0.2043; the certificate of that
+    scaling (least squares on DAQP's two active rows, of norms 29 and 1.3e4) gave the second a
+    multiplier of 5.8e-13, 7.7e-9 of the first's term, above the 1e-10 that then counted, and
+    `_hold_face` held it as an equality where every answer at that scaling leaves it anywhere in
+    its range: level 2 got s = 0.070 where the reference's 0.168 is feasible. A row certifies from
+    CERTIFYING_MULTIPLIER of the largest term on (both runtimes)."""
+    q = np.array([-0.26021537207566914, -0.15214623965787266, 0.20937194506251147, -1.7236691407042992,
+                  0.3759162122909928, 1.392181765041946, 0.45949068471179993])
+    dq = np.array([0.08712483623755453, -0.5424067699660646, -0.7543972607836035, 0.7795644573948721,
+                   0.3086461613334601, 0.5054692234919244, -0.6503680865622523])
+    tau_ext = np.array([9.073011935017508, -0.23602014679814626, -0.0646571666983968, -5.0600156251324755,
+                        -3.796720348488474, 6.492759510770831, 3.504986489349551])
+    errors, scaling = _levels_against_the_reference(PANDA_SUBSET_TOP.replace("LEVEL3", TILT_AND_J5), q, dq, tau_ext, 3)
+    assert scaling[0] < 0.25 and scaling[1] > 0.16, scaling  # (level 1 scaled; level 2 as far as the reference)
+    assert max(errors) <= 1e-6, errors
+
+
+def test_a_level_with_no_direction_left_takes_none_from_the_levels_above():
+    """The same Panda at its planar home (q1 = q3 = q5 = 0, at rest): joint 5's level has no
+    direction left by the levels above (J₅N₂ = 0, an exact algorithmic singularity). Damped at its
+    floor, its inverse was ~1e12 and rounding carried its variables into level 1's task: the
+    scaling stage pushed them to 1e4–1e12 and met level 1's joint limits with s₁ = 1, its achieved
+    acceleration [6, −1.95] off the target's direction [20, −16]; the reference scales it to 0.3
+    ([6, −4.8]). A row with no direction left now takes no part in its level (`damped_inverse`)."""
+    home = np.array([0.0, -0.3, 0.0, -2.0, 0.0, 1.8, 0.8])
+    zeros = np.zeros(7)
+    for level3 in (J5, TILT_AND_J5.splitlines()[1]):
+        errors, scaling = _levels_against_the_reference(PANDA_SUBSET_TOP.replace("LEVEL3", level3), home, zeros, zeros, 3)
+        assert abs(scaling[0] - 0.3) <= 1e-9 and max(errors) <= 1e-9, (scaling, errors)

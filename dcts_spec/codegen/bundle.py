@@ -738,6 +738,7 @@ def generate_sources(
         "PROXIMAL_TOLERANCE": c_double(lexicographic.PROXIMAL_TOLERANCE),
         "ROUNDING_HAIR": c_double(lexicographic.ROUNDING_HAIR),
         "STATIONARY_TOLERANCE": c_double(stage_qp.STATIONARY_TOLERANCE),
+        "HOLD_GAIN": c_double(stage_qp.HOLD_GAIN),
         "RELAX_STEPS": ", ".join(c_double(step) for step in lexicographic.RELAX_STEPS),
         "RELAX_TRIES": len(lexicographic.RELAX_STEPS),
         "SLACK_WEIGHTS": c_array(controller.problem.acceleration_rows.slack_weights) if nr else "0",

@@ -52,7 +52,7 @@ import numpy as np
 
 from .stage_qp import (
     FixedEliminated,
-    certificate,
+    face_rows,
     cholesky_solve,
     clip_to_daqp,
     daqp_qp,
@@ -696,7 +696,8 @@ class Cascade:
         if self._last_qp is None or ubx[s] >= self.ubx[s]:
             return
         qp, multipliers = self._last_qp
-        rows = None if s not in qp.free else certificate(qp, multipliers, -np.eye(1, lbx.size, s)[0])
+        rows = None if s not in qp.free else face_rows(qp, multipliers, -np.eye(1, lbx.size, s)[0],
+                                                        max(1.0, abs(float(witness[s]))))
         if rows is None:
             return
         rows = rows[rows >= qp.free.size] - qp.free.size

@@ -61,6 +61,15 @@ ROW_FLOOR = 1e-4
 # A stage's answer is certified optimal (`stationary`) if its KKT residual on DAQP's active rows is
 # at most this much of the stage's gradient: rounding leaves ~1e-15, an iterate still moving more.
 STATIONARY_TOLERANCE = 1e-10
+# `face_rows`: a row of a scaling's certificate is held (`Cascade._hold_face`) only if freeing it
+# across its whole range could raise the scaling by more than this much of max(1, s) (|μ|‖row‖
+# times the range's width along the row's normal). A Panda's row whose least-squares multiplier
+# was 7.7e-9 of the binding one's (DAQP's own: the same), over a range of 1.8e-3 (in x), could
+# gain 1.4e-11: held, it pinned a row that every answer at that scaling (to HiGHS's tolerance)
+# leaves anywhere in its range, and the level below got s = 0.070 where the reference's 0.168 is
+# feasible (found from outside; a Baxter likewise, 0.037 for 0.111). The weakest row a 27-joint
+# Romeo's final QP needs held (its multiplier 2.4e-9 of the largest) could gain 2.2e-8.
+HOLD_GAIN = 1e-9
 
 
 def clip_to_daqp(values: np.ndarray, out: np.ndarray) -> None:
@@ -237,6 +246,17 @@ def stationary(qp: FixedEliminated, multipliers: np.ndarray, gradient: np.ndarra
     return certificate(qp, multipliers, gradient) is not None
 
 
+def face_rows(qp: FixedEliminated, multipliers: np.ndarray, gradient: np.ndarray, scale: float) -> np.ndarray | None:
+    """The rows of `certificate` whose freeing across its whole range could lower φ by more than
+    HOLD_GAIN × `scale` (|μ|‖row‖ times the range's width along its unit normal), or None."""
+    certified = _certificate(qp, multipliers, gradient)
+    if certified is None:
+        return None
+    rows, terms = certified
+    width = (qp.upper[rows] - qp.lower[rows]) / np.where(qp.row_norms[rows] > 0.0, qp.row_norms[rows], 1.0)
+    return rows[terms * width > HOLD_GAIN * scale]
+
+
 def certificate(qp: FixedEliminated, multipliers: np.ndarray, gradient: np.ndarray) -> np.ndarray | None:
     """The rows of `qp` (its variables' bounds first, as DAQP numbers them) that certify its answer
     minimizes a convex φ (its `gradient` ∇φ there, over every variable), or None if DAQP's active
@@ -247,11 +267,18 @@ def certificate(qp: FixedEliminated, multipliers: np.ndarray, gradient: np.ndarr
     squares' rounding: an iCub's row with 1.5e-9 beside others of ~300 was held by `_hold_face`,
     inactive at the stage's other answers, and the posture below ended 0.092 off its optimum).
     Every minimizer of φ has those rows active (complementary slackness: `Cascade._hold_face`)."""
+    certified = _certificate(qp, multipliers, gradient)
+    return None if certified is None else certified[0]
+
+
+def _certificate(qp: FixedEliminated, multipliers: np.ndarray,
+                 gradient: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """`certificate`'s rows and their |μ|‖row‖."""
     g = gradient[qp.free]
     size = math.sqrt(g.dot(g))
     active = multipliers.nonzero()[0]
     if not active.size:
-        return active if size == 0.0 else None  # (the residual is ∇φ itself)
+        return (active, np.zeros(0)) if size == 0.0 else None  # (the residual is ∇φ itself)
     if active.size > g.size:  # (dependent rows)
         return None
     C = qp.rows[active]
@@ -264,7 +291,9 @@ def certificate(qp: FixedEliminated, multipliers: np.ndarray, gradient: np.ndarr
     if (inequality & (mu * multipliers[active] < 0) & significant).any():  # (on the wrong side)
         return None
     residual = g + C.T @ mu
-    return active[significant] if math.sqrt(residual.dot(residual)) <= STATIONARY_TOLERANCE * size else None
+    if math.sqrt(residual.dot(residual)) > STATIONARY_TOLERANCE * size:
+        return None
+    return active[significant], terms[significant]
 
 
 # Up to this many active rows the certificate's Cholesky runs in plain Python, as ctl_stationary
