@@ -60,17 +60,13 @@ def damped_inverse(a: ca.SX, unrestricted: ca.SX) -> ca.SX:
     (~1e-33), whose pivots are no smaller than its diagonal: judged against itself it looked regular,
     its inverse was ~1e33 and the QP data ~1e16 (a Panda whose elbow joint task lost its one
     direction to the tool's pose at the initial configuration: every step fell back). A row whose
-    diagonal is below RANK_LOST_SCALE of what the level has unrestricted takes no part in the level:
-    its row and column of the inverse are 0. (Damped at that floor instead, its inverse was ~1e12,
+    diagonal is below RANK_LOST_SCALE of what the level has unrestricted is singular, damping the
+    level, and takes no part in it: its row and column of the inverse are 0. (Damped at that floor instead, its inverse was ~1e12,
     and the rounding of its restricted Jacobian gave its variables an effect on the levels above: a
     Panda's scaling stage pushed them to 1e12 to meet a joint limit of level 1 with s = 1, found from
     outside against the reference.)"""
     m = a.shape[0]
-    # a row with no direction left (its diagonal below RANK_LOST_SCALE of the unrestricted scale)
-    # takes no part: its column of J̄ is 0 and the level is the rest of its rows
-    kept = ca.if_else(ca.diag(a) < RANK_LOST_SCALE * unrestricted, 0.0, 1.0)
-    a = a * ca.mtimes(kept, kept.T) + ca.diag(1.0 - kept) * unrestricted
-    d = ca.diag(a) + 1e-300
+    d = ca.fmax(ca.diag(a), RANK_LOST_SCALE * unrestricted) + 1e-300
     inverse_root = 1.0 / ca.sqrt(d)
     unit = a * ca.mtimes(inverse_root, inverse_root.T)  # (unit diagonal)
     # min pivot² ≥ λ_min, and det = Π pivots², so a vanishing eigenvalue shows in a pivot
@@ -79,6 +75,10 @@ def damped_inverse(a: ca.SX, unrestricted: ca.SX) -> ca.SX:
     for j in range(1, m):
         smallest = ca.fmin(smallest, pivots[j])
     closeness = ca.fmax(0.0, 1.0 - smallest / SINGULAR_PIVOT)
+    # a row with no direction left (its diagonal below RANK_LOST_SCALE of the unrestricted scale)
+    # takes no part: its row and column of the inverse, and so its column of J̄, are 0 (a 0/1
+    # comparison, not a branch: straight-line code)
+    kept = ca.diag(a) >= RANK_LOST_SCALE * unrestricted
     return spd_inverse(a + MAX_DAMPING * closeness**2 * ca.diag(d)) * ca.mtimes(kept, kept.T)
 
 
