@@ -226,7 +226,6 @@ class Controller:
         self._torque_params = np.array([i for i in self.param_layout.torque_index if i >= 0], dtype=int)
         self._last_q: np.ndarray | None = None
         self._hint: Hint | None = None  # where the last solve gave way (as the C runtime's hint_first)
-        self._from_relaxation = False  # was the last answer the relaxation's own point (solve_hinted)
         # (else tau_ext is not read: zero, whatever the sensor gives; the C runtime the same)
         self.reads_tau_ext = spec.controller.external_torque == "measured"
         qp = self.law.qp
@@ -306,7 +305,6 @@ class Controller:
         solve gave way), as the C runtime's reset; the parameter set and its ramp are kept."""
         self._last_q = None
         self._hint = None
-        self._from_relaxation = False
 
     def reset_params(self) -> None:
         """Back to the compiled values at once (no ramp), as a freshly initialized controller."""
@@ -327,11 +325,12 @@ class Controller:
         return (data["H"], data["f"].ravel(), data["A"], data["lbx"].ravel(), data["ubx"].ravel(),
                 data["lba"].ravel(), data["uba"].ravel())
 
-    def _solve(self, data: dict[str, np.ndarray]) -> np.ndarray | None:
+    def _solve(self, data: dict[str, np.ndarray]) -> tuple[np.ndarray | None, bool]:
         """The lexicographic solution at the data (None if DAQP failed), its cascade started where
-        the last step's gave way (`solve.Hint`: fewer QPs, the same answer)."""
-        x, self._hint, self._from_relaxation = solve_hinted(*self._qp(data), self._structure, data["Q"], self._hint)
-        return x
+        the last step's gave way (`solve.Hint`: fewer QPs, the same answer), and whether it is the
+        relaxation's own point (`solve_hinted`)."""
+        x, self._hint, from_relaxation = solve_hinted(*self._qp(data), self._structure, data["Q"], self._hint)
+        return x, from_relaxation
 
     def answer_data(self, q, dq, tau_ext, ref, x: np.ndarray) -> AnswerData | None:
         """The last step's answer x (its QP solution, at this state) with its QP data and command
@@ -446,13 +445,13 @@ class Controller:
             return self._fallback(q, dq, STATUS_NONFINITE_INPUT, np.zeros(0))
         self._last_q = q.copy()  # (q may be a view of the caller's array, which it may reuse)
         data = self._evaluate(q, dq, tau_ext, ref, param)
-        x = np.zeros(0)
+        x, from_relaxation = np.zeros(0), False
         if self.nx:
             # H, f, A and the bounds are consecutive outputs: two checks instead of seven
             buffer = self._data_buffer
             finite = np.isfinite(buffer.span("H", "A")).all() and not np.isnan(buffer.span("lba", "ubx")).any()
             if finite:
-                solution = self._solve(data)
+                solution, from_relaxation = self._solve(data)
             else:
                 solution, self._hint = None, None  # (as the C runtime's)
             if solution is None:
@@ -483,7 +482,7 @@ class Controller:
         if self.law.least_squares_task is not None:
             scaling[-1] = self._least_squares_scaling(data, x)
         return StepResult(np.minimum(np.maximum(tau, -tau_max), tau_max), ddq, scaling, status, x, relaxed, optimal,
-                          bool(self.nx) and self._from_relaxation)
+                          from_relaxation)
 
 
 def build_controller(spec: Spec | str | Path, formulation: str | None = None) -> Controller:

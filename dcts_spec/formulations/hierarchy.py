@@ -61,10 +61,10 @@ def damped_inverse(a: ca.SX, unrestricted: ca.SX) -> ca.SX:
     its inverse was ~1e33 and the QP data ~1e16 (a Panda whose elbow joint task lost its one
     direction to the tool's pose at the initial configuration: every step fell back). A row whose
     diagonal is below RANK_LOST_SCALE of what the level has unrestricted is singular, damping the
-    level, and takes no part in it: its row and column of the inverse are 0. (Damped at that floor instead, its inverse was ~1e12,
-    and the rounding of its restricted Jacobian gave its variables an effect on the levels above: a
-    Panda's scaling stage pushed them to 1e12 to meet a joint limit of level 1 with s = 1, found from
-    outside against the reference.)"""
+    level, and takes no part in it: its row and column of the inverse are 0. (Damped at that floor
+    only, its inverse was ~1e12, and the rounding of its restricted Jacobian gave its variables an
+    effect on the levels above: a Panda's scaling stage pushed them to 1e12 to meet a joint limit of
+    level 1 with s = 1, found from outside against the reference.)"""
     m = a.shape[0]
     d = ca.fmax(ca.diag(a), RANK_LOST_SCALE * unrestricted) + 1e-300
     inverse_root = 1.0 / ca.sqrt(d)

@@ -62,8 +62,8 @@ ROW_FLOOR = 1e-4
 # at most this much of the stage's gradient: rounding leaves ~1e-15, an iterate still moving more.
 STATIONARY_TOLERANCE = 1e-10
 # `face_rows`: a row of a scaling's certificate is held (`Cascade._hold_face`) only if freeing it
-# across its whole range could raise the scaling by more than this much of max(1, s) (|μ|‖row‖
-# times the range's width along the row's normal). A Panda's row whose least-squares multiplier
+# across its whole range could raise the scaling by more than this much of max(1, s) (|μ| times
+# the range's width, to first order). A Panda's row whose least-squares multiplier
 # was 7.7e-9 of the binding one's (DAQP's own: the same), over a range of 1.8e-3 (in x), could
 # gain 1.4e-11: held, it pinned a row that every answer at that scaling (to HiGHS's tolerance)
 # leaves anywhere in its range, and the level below got s = 0.070 where the reference's 0.168 is
@@ -248,13 +248,12 @@ def stationary(qp: FixedEliminated, multipliers: np.ndarray, gradient: np.ndarra
 
 def face_rows(qp: FixedEliminated, multipliers: np.ndarray, gradient: np.ndarray, scale: float) -> np.ndarray | None:
     """The rows of `certificate` whose freeing across its whole range could lower φ by more than
-    HOLD_GAIN × `scale` (|μ|‖row‖ times the range's width along its unit normal), or None."""
+    HOLD_GAIN × `scale` (|μ| times the range's width, to first order), or None."""
     certified = _certificate(qp, multipliers, gradient)
     if certified is None:
         return None
-    rows, terms = certified
-    width = (qp.upper[rows] - qp.lower[rows]) / np.where(qp.row_norms[rows] > 0.0, qp.row_norms[rows], 1.0)
-    return rows[terms * width > HOLD_GAIN * scale]
+    rows, mu = certified
+    return rows[np.abs(mu) * (qp.upper[rows] - qp.lower[rows]) > HOLD_GAIN * scale]
 
 
 def certificate(qp: FixedEliminated, multipliers: np.ndarray, gradient: np.ndarray) -> np.ndarray | None:
@@ -273,7 +272,7 @@ def certificate(qp: FixedEliminated, multipliers: np.ndarray, gradient: np.ndarr
 
 def _certificate(qp: FixedEliminated, multipliers: np.ndarray,
                  gradient: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
-    """`certificate`'s rows and their |μ|‖row‖."""
+    """`certificate`'s rows and their multipliers μ."""
     g = gradient[qp.free]
     size = math.sqrt(g.dot(g))
     active = multipliers.nonzero()[0]
@@ -293,7 +292,7 @@ def _certificate(qp: FixedEliminated, multipliers: np.ndarray,
     residual = g + C.T @ mu
     if math.sqrt(residual.dot(residual)) > STATIONARY_TOLERANCE * size:
         return None
-    return active[significant], terms[significant]
+    return active[significant], mu[significant]
 
 
 # Up to this many active rows the certificate's Cholesky runs in plain Python, as ctl_stationary
