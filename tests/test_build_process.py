@@ -16,9 +16,11 @@ from dcts_spec.codegen.bundle import DAQP_VERSION
 from dcts_spec.codegen.process import build_timeout, run, start
 from dcts_spec.phases import reporting
 
-# A "compiler" that starts a child which outlives it unless its group is ended, then hangs.
+# A "compiler" that starts a child which outlives it unless its group is ended, then hangs. The
+# child's pid is written under another name and renamed, so child.pid never exists empty (CI once
+# read it between the shell's open and its echo).
 HANGING_MAKEFILE = """all:
-\tsleep 300 & echo $$! > child.pid; sleep 300
+\tsleep 300 & echo $$! > child.tmp && mv child.tmp child.pid; sleep 300
 """
 
 
