@@ -28,7 +28,7 @@ from .parameter_ramp import ParameterRamp, ramp_steps
 from .robot.model import Robot
 from .solve import (Hint, Structure, check_bounds, marginal_rows, solve_hinted, to_optimum,
                     unbounded_solution)
-from .solve.sensitivity import AnswerData
+from .solve.sensitivity import RELAXED_ROUNDING, ROUNDING, AnswerData
 from .solve.stage_qp import FEASIBILITY_TOLERANCE
 from .spec import Spec, SpecError, load_spec
 from .symbolic.linalg import looped_products
@@ -332,21 +332,23 @@ class Controller:
         x, self._hint, from_relaxation = solve_hinted(*self._qp(data), self._structure, data["Q"], self._hint)
         return x, from_relaxation
 
-    def answer_data(self, q, dq, tau_ext, ref, x: np.ndarray) -> AnswerData | None:
+    def answer_data(self, q, dq, tau_ext, ref, x: np.ndarray, relaxed: bool = False) -> AnswerData | None:
         """The last step's answer x (its QP solution, at this state) with its QP data and command
-        maps, for `solve.sensitivity` (None without a QP)."""
+        maps, for `solve.sensitivity` (None without a QP); `relaxed`: the answer came after a
+        relaxation (its spread is measured at RELAXED_ROUNDING)."""
         if not self.nx:
             return None
         data = self.evaluate_data(q, dq, tau_ext, ref)
         return AnswerData(self._qp(data), self._structure, x, data["tau0"].ravel(), data["T"], data["ddq0"].ravel(),
-                          data["Q"], data["bound_shift"].ravel())
+                          data["Q"], data["bound_shift"].ravel(), RELAXED_ROUNDING if relaxed else ROUNDING)
 
-    def answer_spread(self, q, dq, tau_ext, ref, x: np.ndarray, samples: int, enough: float) -> np.ndarray:
+    def answer_spread(self, q, dq, tau_ext, ref, x: np.ndarray, samples: int, enough: float,
+                      relaxed: bool = False) -> np.ndarray:
         """How far the last step's answer x (its QP solution, at this state) is determined by its QP
         data: [the command's, the solution's] largest relative change when the data change at the
         level of their rounding (`solve/sensitivity.py`; `samples` solves, stopping once both are
         above `enough`), the command being τ and q̈, the solution x. Zeros without a QP."""
-        answer = self.answer_data(q, dq, tau_ext, ref, x)
+        answer = self.answer_data(q, dq, tau_ext, ref, x, relaxed)
         return np.zeros(2) if answer is None else answer.spread(samples, enough)
 
     def status_determined(self, q, dq, tau_ext, ref, x: np.ndarray) -> bool:

@@ -37,8 +37,8 @@ def test_a_vector_whose_answer_rounding_moves_is_compared_less_on_a_second_look(
     monkeypatch.setattr(bundle, "compute_golden", _tampered_solution())
     spread = Controller.answer_spread
 
-    def second_look(self, q, dq, tau_ext, ref, x, samples, enough):
-        measured = spread(self, q, dq, tau_ext, ref, x, samples, enough)
+    def second_look(self, q, dq, tau_ext, ref, x, samples, enough, relaxed=False):
+        measured = spread(self, q, dq, tau_ext, ref, x, samples, enough, relaxed)
         return np.array([measured[0], np.inf]) if samples == bundle.RECHECK_SAMPLES else measured
 
     monkeypatch.setattr(Controller, "answer_spread", second_look)

@@ -408,7 +408,7 @@ def compute_golden(controller: Controller, states: list[State]) -> Golden:
         from_relaxation[k] = r.from_relaxation
         if r.status >= 0:
             limit[k] = _spread_limit(controller, r)
-            answer = controller.answer_data(s.q, s.dq, s.tau_ext, ref, r.x)
+            answer = controller.answer_data(s.q, s.dq, s.tau_ext, ref, r.x, r.status == STATUS_LIMITS_RELAXED)
             if answer is not None:
                 answers[k] = answer
             status_determined[k] = controller.status_determined(s.q, s.dq, s.tau_ext, ref, r.x)
@@ -437,7 +437,8 @@ def recheck_golden(controller: Controller, golden: Golden, vectors: list[int]) -
         if k not in vectors or r.status < 0 or not np.array_equal(r.tau, golden.tau[k]):
             continue  # (a replay that does not give the vector's answer changes nothing)
         limit = _spread_limit(controller, r)
-        spread = controller.answer_spread(s.q, s.dq, s.tau_ext, ref, r.x, RECHECK_SAMPLES, limit)
+        spread = controller.answer_spread(s.q, s.dq, s.tau_ext, ref, r.x, RECHECK_SAMPLES, limit,
+                                          r.status == STATUS_LIMITS_RELAXED)
         golden.spread[k] = np.maximum(golden.spread[k], spread)
         compared = int(_compared(golden.spread[k : k + 1], np.array([limit]))[0])
         if compared < golden.compared[k]:
