@@ -28,6 +28,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
+import dcts_spec
 from dcts_spec.controller import Controller, build_controller
 from dcts_spec.solve import Hint, Structure, solve_hinted, solve_lexicographic, unbounded_solution
 from dcts_spec.robot.builtin import example_robot_data_dir
@@ -1534,8 +1535,6 @@ def test_a_bound_is_checked_against_its_own_size_not_its_rows():
 @pytest.mark.skipif(not os.environ.get("DCTS_SLOW"), reason="builds a C bundle (~20 s): set DCTS_SLOW=1 to run it")
 def test_a_bound_is_checked_against_its_own_size_in_c_too(tmp_path, monkeypatch):
     """The C runtime at PR2_STATE."""
-    import dcts_spec
-
     monkeypatch.setenv("DCTS_CACHE_DIR", str(tmp_path / "cache"))
     spec = load_spec_text(PR2_SPEC, "spec.yaml")
     compiled = dcts_spec.compile_c(spec, tmp_path / "bundle")
@@ -1754,6 +1753,75 @@ def test_rows_held_after_a_scaling_are_the_ones_its_multipliers_certify_beyond_r
     errors, scaling = _levels_against_the_reference(PANDA_SUBSET_TOP.replace("LEVEL3", TILT_AND_J5), q, dq, tau_ext, 3)
     assert scaling[0] < 0.25 and scaling[1] > 0.16, scaling  # (level 1 scaled; level 2 as far as the reference)
     assert max(errors) <= 1e-6, errors
+
+
+def test_a_certificate_takes_no_row_in_for_another_rows_rounding():
+    """The scaling stage of a 10-joint iCub's hand orientation (found from outside: `dcts compile`
+    of ICUB_ROUNDING_SPEC refused it, golden vector 101, the C 50 Nm from Python). The stage is
+    certified by the wrist's torque row alone, with a multiplier of 8.4e4: its free coefficients are
+    the scaling's, 1.2e-5, and 1e-14-sized ones in the levels below, whose motions leave the hand's
+    acceleration and so that torque as they are (rounding: ~1e-11 of the row's size). The least
+    squares took four more active rows in at 5e-10–2e-9 of the largest term, to cancel those
+    entries times the multiplier, and `_hold_face` held them; the C's stage ended where they were
+    active, and the bend below came out 32 % above the least. Entries that are rounding by
+    CONSTANT_ROW's measure are now 0 in the certificate. Saved: the C's stage at that state (A,
+    DAQP's bounds of [x; Ax] with the scaling x[1] free, DAQP's multipliers)."""
+    from dcts_spec.solve.stage_qp import FixedEliminated, face_rows
+
+    data = np.load(Path(__file__).parent / "data" / "certificate_rounding_entries.npz")
+    qp = FixedEliminated.of(data["A"], data["lower"], data["upper"])
+    multipliers = data["multipliers"]
+    assert set(np.flatnonzero(multipliers)) == {6, 7, 14, 18, 24}  # (premise: DAQP's active rows there)
+    rows = face_rows(qp, multipliers, -np.eye(1, data["A"].shape[1], 1)[0], 1.0)
+    assert rows is not None and rows.tolist() == [14], rows
+
+
+ICUB_ROUNDING_SPEC = f"""
+version: 1
+name: icub_rounding
+robot:
+  urdf: {example_robot_data_dir() / "icub_description" / "robots" / "icub.urdf"}
+  locked_joints: {{l_hip_pitch: 0.77, l_hip_roll: 0, l_hip_yaw: 0.0, l_knee: -0.89, l_ankle_pitch: -0.1833, l_ankle_roll: 0.0, r_hip_pitch: 0.77, r_hip_roll: 0, r_hip_yaw: 0.0, r_knee: -0.89, r_ankle_pitch: -0.1833, r_ankle_roll: 0.0, neck_pitch: 0, neck_roll: 0, neck_yaw: 0, r_shoulder_pitch: -0.7854, r_shoulder_roll: 1.4032, r_shoulder_yaw: 0.5498, r_elbow: 0.973, r_wrist_prosup: 0.0, r_wrist_pitch: -0.48, r_wrist_yaw: 0.0}}
+limits:
+  joint_torque: {{max: [72.0, 160.0, 160.0, 168.0, 168.0, 68.0, 40.0, 0.9, 1.3, 1.3], allow_outside_urdf: true}}
+  joint_velocity: {{max: 3.0}}
+controller: {{formulation: dcts}}
+tasks:
+  - {{name: hand, type: position, frame: l_hand_dh_frame, priority: 1, gains: {{kp: 100, kd: 20}}, reference: {{input: true, feedforward: true}}}}
+  - {{name: hand_ori, type: orientation, frame: l_hand_dh_frame, priority: 2, gains: {{kp: 50, kd: 14}}, reference: {{rpy: [-0.93239, -0.54672, -2.66151]}}}}
+  - {{name: chest_yaw, type: orientation, frame: chest, axes: [rz], priority: 3, gains: {{kp: 50, kd: 14}}, reference: {{rpy: [1.49147, 0.20896, -3.03987]}}}}
+  - {{name: posture, type: joint, priority: 4, gains: {{kp: 10, kd: 6}}, reference: {{q: [0.1, 0.0, 0.1, -0.6, 0.6, 0.3, 0.9, 0.0, -0.3, 0.0]}}}}
+scenario: {{duration: 1.0, initial_q: [0.1, 0.0, 0.1, -0.6, 0.6, 0.3, 0.9, 0.0, -0.3, 0.0]}}
+"""
+ICUB_ROUNDING_STATE = (  # q, q̇, the hand's reference input (position, velocity, acceleration)
+    [1.2221186749680029, -0.45331747747789375, -0.8345618202745343, -0.45288411847891696, 0.5853739053578915,
+     0.1143990656793128, 1.7607300974695341, 0.6017577446767924, -0.8862018836197271, -0.10079271055841471],
+    [-0.3540314887805006, -0.9516875759489022, -1.5083844961369397, -0.6496257540181982, -0.19620700443390954,
+     -0.1251845779546321, 1.9386440679993033, 1.169466146609535, 0.14706471372050087, 0.5404304300236178],
+    [-0.33220404320390945, -0.09628705288196779, 0.07303265470500854, -0.01656794395484794, 0.12442402358798742,
+     -0.014686530202748807, -0.5644681772449175, 0.04186146014970233, -0.6243027038869091])
+
+
+@pytest.mark.skipif(not os.environ.get("DCTS_SLOW"), reason="builds a C bundle (~20 s): set DCTS_SLOW=1 to run it")
+def test_the_c_certificate_takes_no_row_in_for_another_rows_rounding(tmp_path, monkeypatch):
+    """The C runtime at ICUB_ROUNDING_STATE (the default tier's instance is the test above, on the
+    C's stage): the torques of the Python runtime, whose chest-yaw bend is HiGHS's least with the
+    levels above as they are (1267.24 in the scaled variables; the C had 1678.99)."""
+    monkeypatch.setenv("DCTS_CACHE_DIR", str(tmp_path / "cache"))
+    spec = load_spec_text(ICUB_ROUNDING_SPEC, "spec.yaml")
+    python, compiled = build_controller(spec), dcts_spec.compile_c(spec, tmp_path / "bundle")
+    q, dq, ref = (np.array(v) for v in ICUB_ROUNDING_STATE)
+    expected, got = python.step(q, dq, np.zeros(10), ref), compiled.step(q, dq, np.zeros(10), ref)
+    assert got.status == expected.status == 0
+    H, f, A, lbx, ubx, lba, uba = python._qp(python.evaluate_data(q, dq, np.zeros(10), ref))
+    lower, upper = lbx.copy(), ubx.copy()
+    lower[:9] = upper[:9] = expected.x[:9]  # the levels above the chest's yaw as they are, its s free
+    lower[2] = 0.0
+    Q = np.zeros((lbx.size, lbx.size))
+    Q[9, 9] = 1.0  # its bend
+    least, _ = solve_highs(np.zeros(lbx.size), A, lba, uba, lower, upper, Q=Q)
+    assert abs(expected.x[9] - least[9]) <= 1e-6 * abs(least[9])
+    np.testing.assert_allclose(got.tau, expected.tau, rtol=1e-6, atol=1e-8)
 
 
 def test_a_level_with_no_direction_left_takes_none_from_the_levels_above():

@@ -130,7 +130,10 @@ class FixedEliminated:
                 row_scale[faint] *= factor
             else:  # (without bounds: the check on the answer decides)
                 constant |= faint
-            rows = np.vstack((np.eye(free.size), A_free))
+            # (the certificate's rows: an entry that is rounding by CONSTANT_ROW's measure is 0, see
+            # `certificate`)
+            rows = np.vstack((np.eye(free.size), np.where(np.abs(A[:, free]) <= CONSTANT_ROW * row_size[:, None], 0.0,
+                                                          A_free)))
             layout = (free, A_free, np.ix_(free, free), np.flatnonzero(constant), rows,
                       np.sqrt((rows * rows).sum(axis=1)), row_scale, np.flatnonzero(faint))
             if layouts is not None:
@@ -265,7 +268,14 @@ def certificate(qp: FixedEliminated, multipliers: np.ndarray, gradient: np.ndarr
     its |μ|‖row‖ is above that much of ∇φ and of the largest |μ|‖row‖ (smaller, it is the least
     squares' rounding: an iCub's row with 1.5e-9 beside others of ~300 was held by `_hold_face`,
     inactive at the stage's other answers, and the posture below ended 0.092 off its optimum).
-    Every minimizer of φ has those rows active (complementary slackness: `Cascade._hold_face`)."""
+    Every minimizer of φ has those rows active (complementary slackness: `Cascade._hold_face`).
+    A row's free coefficients that are rounding (at most CONSTANT_ROW × its largest coefficient,
+    as `constant_rows` measures a whole row) are 0 here: a 10-joint iCub's wrist torque row sees
+    the levels below a 6-D hand task only through rounding (their motions leave the hand's
+    acceleration as it is), 1e-11 of its size, and with its multiplier of 8e4 certifying a scaling
+    those entries took four torque and acceleration rows into the certificate at 5e-10–2e-9 of
+    it; held, they pinned a level below to a bend 32 % above the least (the C runtime, whose
+    stage ended where those rows were active; found from outside)."""
     certified = _certificate(qp, multipliers, gradient)
     return None if certified is None else certified[0]
 
