@@ -101,7 +101,6 @@ class FixedEliminated:
     hessian_index: tuple[np.ndarray, np.ndarray]  # H_ff = H[hessian_index]
     rows: np.ndarray  # [I; A_f]: DAQP's rows in the free variables, bounds first (`stationary`)
     row_norms: np.ndarray
-    row_sizes: np.ndarray  # each of those rows' largest coefficient over every variable, in DAQP's units
     faint: np.ndarray  # the rows of A DAQP would take for zero rows (DAQP_ZERO_TOL)
 
     @classmethod
@@ -135,12 +134,11 @@ class FixedEliminated:
             # `certificate`)
             rows = np.vstack((np.eye(free.size), np.where(np.abs(A[:, free]) <= CONSTANT_ROW * row_size[:, None], 0.0,
                                                           A_free)))
-            sizes = np.concatenate((np.ones(free.size), row_size if row_scale is None else row_size * row_scale))
             layout = (free, A_free, np.ix_(free, free), np.flatnonzero(constant), rows,
-                      np.sqrt((rows * rows).sum(axis=1)), sizes, row_scale, np.flatnonzero(faint))
+                      np.sqrt((rows * rows).sum(axis=1)), row_scale, np.flatnonzero(faint))
             if layouts is not None:
                 layouts[key] = layout
-        free, A_free, index, constant, rows, row_norms, sizes, row_scale, faint = layout
+        free, A_free, index, constant, rows, row_norms, row_scale, faint = layout
         if free.size == n:
             point = np.zeros(n)
         else:
@@ -155,7 +153,7 @@ class FixedEliminated:
             clip_to_daqp(upper[free.size:] * row_scale, upper[free.size:])
         if constant.size:  # (rows of A; in DAQP's [x_f; A_f x_f] after the free variables)
             lower[free.size + constant], upper[free.size + constant] = -DAQP_INF, DAQP_INF
-        return cls(free, point, A_free, lower, upper, index, rows, row_norms, sizes, faint)
+        return cls(free, point, A_free, lower, upper, index, rows, row_norms, faint)
 
     def widened(self, relative: float) -> FixedEliminated:
         """The same QP with every inequality row (not the variables' bounds, nor an equality)
@@ -167,7 +165,7 @@ class FixedEliminated:
         lower[inequality] = np.maximum(lower[inequality] - margin, -DAQP_INF)
         upper[inequality] = np.minimum(upper[inequality] + margin, DAQP_INF)
         return FixedEliminated(self.free, self.point, self.A, lower, upper, self.hessian_index, self.rows, self.row_norms,
-                               self.row_sizes, self.faint)
+                               self.faint)
 
 
 def _daqp_zero_rows(A_free: np.ndarray) -> np.ndarray:
@@ -252,44 +250,13 @@ def stationary(qp: FixedEliminated, multipliers: np.ndarray, gradient: np.ndarra
 
 
 def face_rows(qp: FixedEliminated, multipliers: np.ndarray, gradient: np.ndarray, scale: float) -> np.ndarray | None:
-    """The rows of `certificate` the others need (`_needed`) whose freeing across its whole range
-    could lower φ by more than HOLD_GAIN × `scale` (|μ| times the range's width, to first order), or
-    None."""
+    """The rows of `certificate` whose freeing across its whole range could lower φ by more than
+    HOLD_GAIN × `scale` (|μ| times the range's width, to first order), or None."""
     certified = _certificate(qp, multipliers, gradient)
     if certified is None:
         return None
-    rows, mu = _needed(qp, multipliers, gradient, *certified)
+    rows, mu = certified
     return rows[np.abs(mu) * (qp.upper[rows] - qp.lower[rows]) > HOLD_GAIN * scale]
-
-
-def _needed(qp: FixedEliminated, multipliers: np.ndarray, gradient: np.ndarray, rows: np.ndarray,
-            mu: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """A certificate's rows (and multipliers) without those the others certify without: each, from
-    the smallest term |μ|‖row‖ up, is left out if the rest, μ solved again, leave a residual within
-    STATIONARY_TOLERANCE of ∇φ or within what the rounding of their entries explains (each up to
-    CONSTANT_ROW × its row's largest coefficient: √k × CONSTANT_ROW × Σ|μ|·size), every inequality's
-    μ on its side. A 10-joint iCub's scaling stage (found from outside) was certified by a wrist
-    torque row, multiplier 8e3, whose entries in the levels below were rounding 1.03e-10 of its size
-    (just above CONSTANT_ROW): two torque rows came in at 2e-10 and 5e-10 of the largest term to
-    cancel them, and held, they left a level below bent 1,690 where it is met exactly."""
-    g = gradient[qp.free]
-    floor = STATIONARY_TOLERANCE * math.sqrt(g.dot(g))
-    keep = np.ones(rows.size, dtype=bool)
-    for b in np.argsort(np.abs(mu) * qp.row_norms[rows], kind="stable"):
-        keep[b] = False
-        trial = rows[keep]
-        C = qp.rows[trial]
-        solved = cholesky_solve(C @ C.T, -(C @ g))
-        if solved is not None:
-            residual = g + C.T @ solved
-            explained = math.sqrt(g.size) * CONSTANT_ROW * float(np.abs(solved) @ qp.row_sizes[trial])
-            sides = (qp.lower[trial] == qp.upper[trial]) | (solved * multipliers[trial] >= 0.0)
-            if math.sqrt(residual.dot(residual)) <= max(floor, explained) and sides.all():
-                mu = mu.copy()
-                mu[keep] = solved
-                continue
-        keep[b] = True
-    return rows[keep], mu[keep]
 
 
 def certificate(qp: FixedEliminated, multipliers: np.ndarray, gradient: np.ndarray) -> np.ndarray | None:
