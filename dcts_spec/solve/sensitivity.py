@@ -50,14 +50,14 @@ def rounding_spread(H, f, A, lbx, ubx, lba, uba, structure: Structure, x: np.nda
                     bound_shift: np.ndarray | None = None, rounding: float | None = None) -> np.ndarray:
     """For each group of outputs(x) (e.g. the torques, the QP solution), the largest relative
     change (|Δ| / max(1, |value|), entry by entry) over `samples` solves of the QP with every entry
-    of its data changed by ~ROUNDING relative (H symmetrically; both bounds of a variable or a row
+    of its data changed by ~`rounding` relative (H symmetrically; both bounds of a variable or a row
     by the same factor, so that a variable fixed stays fixed and an equality stays one). Sampling
     stops as soon as every group's change exceeds `enough`; a group's spread is ∞ if a solve fails.
     Groups, because a level that no free direction can move leaves its own variables undetermined
     and the torques not (a degenerate level of a 7-joint arm: x moved by 1e2, τ by 2e-8).
     `acceleration_map`: as for `solve_lexicographic` (changed like the data); `bound_shift`: the
     bound rows' constant part, as for `check_bounds` (None: 0, the rows' bounds are in their units);
-    `rounding`: the relative size of the changes (None: ROUNDING)."""
+    `rounding`: that relative size (None: ROUNDING)."""
     rounding = ROUNDING if rounding is None else rounding
     rng = np.random.default_rng(seed)
     shift = np.zeros(len(structure.bound_rows)) if bound_shift is None else bound_shift
