@@ -393,7 +393,7 @@ def test_a_peak_over_joints_is_printed_in_the_unit_of_its_joint(tmp_path: Path) 
     assert "velocity 0.1 m/s (33.3% of its limit), torque 0, " in line()
     log.dq[6] = [0.0, 2.5, 0.0]  # the shoulder 0.5 rad/s beyond its 2 rad/s: 25 %, the lift's 33 %
     # (summarize's worst_joints: the largest excess and the largest share at different joints)
-    assert "velocity 0.5 rad/s (on shoulder; 33.3% of lift's limit), " in line()
+    assert "velocity 0.5 rad/s (on shoulder; as a share of a joint's limit, up to 33.3% on lift), " in line()
 
 
 def test_printed_summary_carries_units(case) -> None:
@@ -547,7 +547,7 @@ def test_the_share_of_a_limit_names_its_joint_where_it_is_not_the_largest_values
     summary = {"max_torque_jump": 1132.0, "max_torque_jump_ratio": 1.88,
                "worst_joints": {"max_torque_jump": "torso_lift", "max_torque_jump_ratio": "r_shoulder_pan"}}
     assert share_of_limit(SimpleNamespace(summary=summary), "max_torque_jump") == \
-        "on torso_lift; 188% of r_shoulder_pan's limit"
+        "on torso_lift; as a share of a joint's limit, up to 188% on r_shoulder_pan"
     summary["worst_joints"]["max_torque_jump_ratio"] = "torso_lift"
     summary["max_torque_jump_ratio"] = 0.113
     assert share_of_limit(SimpleNamespace(summary=summary), "max_torque_jump") == "11.3% of its limit"

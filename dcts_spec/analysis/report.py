@@ -32,14 +32,16 @@ def peak_unit(run: RunResult, key: str) -> str:
 def share_of_limit(run: RunResult, key: str) -> str:
     """`12.6% of its limit`, or where the largest share of a limit is at another joint than the
     largest value (a prismatic lift's 1,132 N is 11 % of its limit; a shoulder's 56 Nm, 188 %):
-    `on torso_lift; 188% of r_shoulder_pan's limit`."""
+    `on torso_lift; as a share of a joint's limit, up to 188% on r_shoulder_pan` (two joints, and
+    said so: "188% of r_shoulder_pan's limit" after torso_lift's value read as one joint's, found
+    from outside)."""
     s = run.summary
     share = f"{100 * s[key + '_ratio']:.3g}%"
     worst = s.get("worst_joints", {})
     joint, joint_of_ratio = worst.get(key), worst.get(key + "_ratio")
     if joint == joint_of_ratio or joint is None or joint_of_ratio is None:
         return f"{share} of its limit"
-    return f"on {joint}; {share} of {joint_of_ratio}'s limit"
+    return f"on {joint}; as a share of a joint's limit, up to {share} on {joint_of_ratio}"
 
 
 def min_scaling_text(summary: dict[str, Any]) -> str:
