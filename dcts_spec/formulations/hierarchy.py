@@ -66,7 +66,8 @@ def damped_inverse(a: ca.SX, unrestricted: ca.SX) -> ca.SX:
     effect on the levels above: a Panda's scaling stage pushed them to 1e12 to meet a joint limit of
     level 1 with s = 1, found from outside against the reference.)"""
     m = a.shape[0]
-    d = ca.fmax(ca.diag(a), RANK_LOST_SCALE * unrestricted) + 1e-300
+    floor = RANK_LOST_SCALE * unrestricted  # a diagonal below it: no direction left
+    d = ca.fmax(ca.diag(a), floor) + 1e-300
     inverse_root = 1.0 / ca.sqrt(d)
     unit = a * ca.mtimes(inverse_root, inverse_root.T)  # (unit diagonal)
     # min pivot² ≥ λ_min, and det = Π pivots², so a vanishing eigenvalue shows in a pivot
@@ -75,10 +76,10 @@ def damped_inverse(a: ca.SX, unrestricted: ca.SX) -> ca.SX:
     for j in range(1, m):
         smallest = ca.fmin(smallest, pivots[j])
     closeness = ca.fmax(0.0, 1.0 - smallest / SINGULAR_PIVOT)
-    # a row with no direction left (its diagonal below RANK_LOST_SCALE of the unrestricted scale)
-    # takes no part: its row and column of the inverse, and so its column of J̄, are 0 (a 0/1
-    # comparison, not a branch: straight-line code)
-    kept = ca.diag(a) >= RANK_LOST_SCALE * unrestricted
+    # a row with no direction left (its diagonal below the floor) takes no part: its row and column
+    # of the inverse, and so its column of J̄, are 0 (a 0/1 comparison, not a branch: straight-line
+    # code)
+    kept = ca.diag(a) >= floor
     return spd_inverse(a + MAX_DAMPING * closeness**2 * ca.diag(d)) * ca.mtimes(kept, kept.T)
 
 

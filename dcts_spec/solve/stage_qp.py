@@ -118,7 +118,8 @@ class FixedEliminated:
             free = np.flatnonzero(~fixed)
             A_free = np.ascontiguousarray(A[:, free])
             row_size = row_sizes(A)
-            constant = constant_rows(A_free, row_size)
+            rounding = rounding_entries(A_free, row_size)
+            constant = rounding.all(axis=1)  # (`constant_rows`)
             row_scale = _row_scale(row_size, constant)  # (ROW_FLOOR: A_f and its bounds times it)
             if row_scale is not None:
                 A_free = A_free * row_scale[:, None]
@@ -130,10 +131,8 @@ class FixedEliminated:
                 row_scale[faint] *= factor
             else:  # (without bounds: the check on the answer decides)
                 constant |= faint
-            # (the certificate's rows: an entry that is rounding by CONSTANT_ROW's measure is 0, see
-            # `certificate`)
-            rows = np.vstack((np.eye(free.size), np.where(np.abs(A[:, free]) <= CONSTANT_ROW * row_size[:, None], 0.0,
-                                                          A_free)))
+            # (the certificate's rows: an entry that is rounding is 0 there, see `certificate`)
+            rows = np.vstack((np.eye(free.size), np.where(rounding, 0.0, A_free)))
             layout = (free, A_free, np.ix_(free, free), np.flatnonzero(constant), rows,
                       np.sqrt((rows * rows).sum(axis=1)), row_scale, np.flatnonzero(faint))
             if layouts is not None:
@@ -204,11 +203,16 @@ def row_sizes(A: np.ndarray) -> np.ndarray:
     return np.abs(A).max(axis=1, initial=0.0)
 
 
-def constant_rows(A_free: np.ndarray, row_size: np.ndarray) -> np.ndarray:
-    """The rows whose coefficients of the free variables (A_free) are nothing but rounding: at most
-    CONSTANT_ROW × the row's largest coefficient (`row_sizes` of the whole row; all zero in exact
+def rounding_entries(A_free: np.ndarray, row_size: np.ndarray) -> np.ndarray:
+    """The coefficients of the free variables (A_free) that are nothing but rounding: at most
+    CONSTANT_ROW × their row's largest coefficient (`row_sizes` of the whole row; zero in exact
     arithmetic, ~1e-16 relative in the QP data)."""
-    return row_sizes(A_free) <= CONSTANT_ROW * row_size
+    return np.abs(A_free) <= CONSTANT_ROW * row_size[:, None]
+
+
+def constant_rows(A_free: np.ndarray, row_size: np.ndarray) -> np.ndarray:
+    """The rows whose coefficients of the free variables are all rounding (`rounding_entries`)."""
+    return rounding_entries(A_free, row_size).all(axis=1)
 
 
 def daqp_qp(H: np.ndarray, f: np.ndarray, qp: FixedEliminated,
