@@ -111,8 +111,10 @@ def random_states(model: pin.Model, count: int, seed: int, margin: float = 0.3, 
 # -- the spec's tasks as the reference sees them ---------------------------------------------------
 
 
-def numeric_tasks(spec: Spec, joint_names: list[str]) -> list[NumericTask]:
-    """The spec's tasks read directly from the spec entries (not through dcts_spec.tasks)."""
+def numeric_tasks(spec: Spec, joint_names: list[str], model: pin.Model | None = None) -> list[NumericTask]:
+    """The spec's tasks read directly from the spec entries (not through dcts_spec.tasks). With the
+    robot's `model`, a joint task's joints without position limits (Pinocchio's ±1e10 or beyond:
+    a URDF continuous joint) take the short way round."""
     out = []
     for t in spec.tasks:
         ref = t.reference
@@ -125,7 +127,10 @@ def numeric_tasks(spec: Spec, joint_names: list[str]) -> list[NumericTask]:
         kd = np.broadcast_to(np.asarray(t.gains.kd, dtype=float), (dim,)).copy()
         if t.type == "joint":
             q = None if ref is None or ref.q is None else np.array(to_si(list(ref.q), ref.unit))
-            out.append(NumericTask(t.priority, "joint", kp, kd, joints=[joint_names.index(j) for j in joints], q=q))
+            indices = [joint_names.index(j) for j in joints]
+            wrapped = None if model is None else tuple(
+                bool(model.lowerPositionLimit[i] <= -1e10 and model.upperPositionLimit[i] >= 1e10) for i in indices)
+            out.append(NumericTask(t.priority, "joint", kp, kd, joints=indices, q=q, wrapped=wrapped))
         else:
             position = None if ref is None or ref.position is None else np.array(ref.position, dtype=float)
             rotation = None if ref is None or ref.rpy is None else pin.rpy.rpyToMatrix(*to_si(list(ref.rpy), ref.unit))

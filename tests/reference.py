@@ -26,6 +26,9 @@ class NumericTask:
     position: np.ndarray | None = None
     rotation: np.ndarray | None = None
     q: np.ndarray | None = None
+    # joint task: which of its joints have no position limit (a URDF continuous joint), whose error
+    # takes the short way round, in (−π, π]
+    wrapped: tuple[bool, ...] | None = None
 
 
 LINEAR = ("x", "y", "z")
@@ -90,6 +93,8 @@ def task_terms(model: pin.Model, data: pin.Data, task: NumericTask, q: np.ndarra
         J = np.zeros((len(task.joints), n))
         J[np.arange(len(task.joints)), task.joints] = 1.0
         error = np.zeros(len(task.joints)) if task.q is None else task.q - q[task.joints]
+        if task.wrapped is not None:
+            error = np.where(task.wrapped, np.angle(np.exp(1j * error)), error)
         bias = np.zeros(len(task.joints))
     else:
         fid = model.getFrameId(task.frame)

@@ -18,6 +18,8 @@ from dcts_spec.robot.urdf import build_model, revolute_from_continuous
 from dcts_spec.sim.runner import prepare_simulation
 from dcts_spec.spec import SpecError, load_spec
 from dcts_spec.validate import validate_spec
+from formulation_cases import numeric_tasks, relative
+from reference import closed_form_hierarchy
 
 INERTIAL = """<inertial><origin xyz="0.05 0.01 0.2"/><mass value="{m}"/>
       <inertia ixx="0.03" iyy="0.02" izz="0.01" ixy="0.001" ixz="0" iyz="0.002"/></inertial>"""
@@ -78,32 +80,42 @@ def test_a_continuous_joint_is_a_revolute_one_with_the_same_dynamics(tmp_path: P
         assert np.allclose(tool[0].homogeneous, tool[1].homogeneous, atol=1e-12)
 
 
-def test_a_spec_drives_a_continuous_joint_and_locks_one_at_its_angle(tmp_path: Path) -> None:
-    """A spec on that URDF validates (the joint was refused before), locks the wrist at 0.7 rad
-    where the tool is where Pinocchio's own model puts it, and its controller steps with status ok.
-    `dcts describe` calls the forearm roll continuous."""
-    path = _urdf(tmp_path)
-    spec_file = tmp_path / "roll_arm.yaml"
-    spec_file.write_text(f"""version: 1
+ROLL_ARM_SPEC = """version: 1
 name: roll_arm
 robot:
-  urdf: {path.name}
-  locked_joints: {{wrist_roll: 0.7}}
+  urdf: roll_arm.urdf
+  locked_joints: {wrist_roll: 0.7}
 tasks:
   - name: tool
     type: position
     frame: tool
     axes: [x]
     priority: 1
-    gains: {{kp: 100, kd: 20}}
-    reference: {{position: [0.1, 0.0, 0.0]}}
+    gains: {kp: 100, kd: 20}
+    reference: {position: [0.1, 0.0, 0.0]}
   - name: posture
     type: joint
     priority: 2
-    gains: {{kp: 10, kd: 6}}
-    reference: {{q: [0.3, 4.0]}}
-""")
-    spec = load_spec(spec_file)
+    gains: {kp: 10, kd: 6}
+    reference: {q: [0.3, 4.0]}
+"""
+
+
+def _roll_arm_spec(tmp_path: Path):
+    """The roll arm with its wrist locked: a position task on the tool, a posture whose target for
+    the continuous forearm roll (4.0 rad) is the long way round from where the tests put it."""
+    _urdf(tmp_path)
+    spec_file = tmp_path / "roll_arm.yaml"
+    spec_file.write_text(ROLL_ARM_SPEC)
+    return load_spec(spec_file)
+
+
+def test_a_spec_drives_a_continuous_joint_and_locks_one_at_its_angle(tmp_path: Path) -> None:
+    """A spec on that URDF validates (the joint was refused before), locks the wrist at 0.7 rad
+    where the tool is where Pinocchio's own model puts it, and its controller steps with status ok.
+    `dcts describe` calls the forearm roll continuous."""
+    path = _urdf(tmp_path)
+    spec = _roll_arm_spec(tmp_path)
     robot = validate_spec(spec).robot
     assert robot.joint_names == ["shoulder", "forearm_roll"]
     assert joint_bound_text(robot, 1) == "|forearm_roll'| ≤ 3 rad/s"  # (what summary.json names a relaxed bound by)
@@ -374,3 +386,19 @@ def test_a_payload_the_robot_carries_is_in_the_controllers_model_and_the_plants(
     with pytest.raises(SpecError) as caught:
         load_spec(spec)
     assert f"{spec}:6:" in str(caught.value) and "no rigid body has these principal moments" in str(caught.value)
+
+
+def test_the_reference_takes_a_continuous_joint_the_short_way_as_dcts_does(tmp_path: Path) -> None:
+    """The independent reference (tests/reference.py) wraps a joint task's error on a joint without
+    position limits as dcts does: at this state the forearm roll's target is 6.5 rad the long way
+    round and 0.22 rad the short way, and the reference's torque equals dcts's only with the wrap."""
+    spec = _roll_arm_spec(tmp_path)
+    controller = build_controller(spec)
+    model, names = controller.robot.model, controller.robot.joint_names
+    q, dq, tau_ext = np.array([0.4, -2.5]), np.array([0.1, 0.5]), np.zeros(2)
+    result = controller.step(q, dq, tau_ext)
+    assert result.status == 0 and np.allclose(result.scaling, 1.0)
+    wrapped, _, _ = closed_form_hierarchy(model, numeric_tasks(spec, names, model), q, dq, tau_ext)
+    unwrapped, _, _ = closed_form_hierarchy(model, numeric_tasks(spec, names), q, dq, tau_ext)
+    assert relative(result.tau, wrapped) < 1e-9, (result.tau, wrapped)
+    assert relative(result.tau, unwrapped) > 1e-2  # (the state tells the two apart)
