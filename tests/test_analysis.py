@@ -297,6 +297,31 @@ def _numbers(value) -> bool:
     return isinstance(value, (int, float)) and not isinstance(value, bool)
 
 
+
+def test_a_crossing_after_an_ok_step_counts_collision_pairs_and_not_a_narrowed_limit(case) -> None:
+    """crossed_after_ok_steps compares each bound's excess at k+1 with the one at k under the limits
+    step k held. Found from outside: a Kinova's end effector crossed its 0.02 m from a box by
+    4.45e-5 m after the "ok" step at a push's onset, uncounted (collision pairs were left out), and
+    a velocity limit a run-time parameter lowered below the speed was counted as the plant's doing."""
+    from types import SimpleNamespace
+
+    spec, robot, log, _ = case
+    steps = len(log.status)
+    log = SimulationLog(**{**log.__dict__, "q": np.tile(log.q[0], (steps, 1)), "dq": np.zeros_like(log.dq),
+                           "status": np.zeros_like(log.status)})
+    log.dq[:, 0] = 0.5
+    series = evaluate(spec, robot, log)
+    series.limits.joint.v_max[12:, 0] = 0.3  # narrowed at sample 12, under the joint's 0.5 rad/s
+    pairs = SimpleNamespace(pairs=[SimpleNamespace(min_distance=0.02)])
+    distances = np.full((steps, 1), 0.05)
+    assert summarize(log, series, robot, [1, 2, 3], pairs, distances)["crossed_after_ok_steps"] == 0
+    distances[21, 0] = 0.02 - 4.45e-5  # the step at sample 20 let the pair cross
+    log.dq[31:, 0] = 0.6  # the step at sample 30 sped the joint up beyond its narrowed limit
+    summary = summarize(log, series, robot, [1, 2, 3], pairs, distances)
+    assert summary["crossed_after_ok_steps"] == 2 and summary["crossed_after_ok_first"] == pytest.approx(log.time[20])
+    log.status[20] = 1  # a relaxed step vouches for nothing
+    assert summarize(log, series, robot, [1, 2, 3], pairs, distances)["crossed_after_ok_steps"] == 1
+
 def test_every_number_in_the_summary_has_a_unit(case) -> None:
     run, series = _summary(case)
     s, units = run.summary, run.summary["units"]

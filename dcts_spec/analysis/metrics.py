@@ -16,8 +16,10 @@ applied then, ramps included):
   solved for (its model M_c, its τ_ext input: series.controller_acceleration), the one
   limits.joint_acceleration bounds; joint_acceleration_limits: whether the spec bounds it
   (without, the velocity limits alone allow up to 2 q̇_max/T a step)
-- crossed_after_ok_steps = #{k: status_k = 0 and some joint position, velocity or Cartesian bound's
-  excess at sample k+1 exceeds the one at k by more than CROSSING_TOLERANCE}, crossed_after_ok_first
+- crossed_after_ok_steps = #{k: status_k = 0 and some joint position, velocity, Cartesian or
+  collision bound's excess at sample k+1 exceeds the one at k by more than CROSSING_TOLERANCE, both
+  under the limits sample k was held to (a run-time parameter that narrows a limit at k+1 is not the
+  plant's doing)}, crossed_after_ok_first
   the first such t_k (None if none): where the plant is not the model the status vouched for (an
   unknown payload, a late τ_ext, a mass mismatch); None as limits_relaxed is
 - solver_failures = #{k: status_k < 0}; limits_relaxed = #{k: status_k = 1}, None for a formulation
@@ -67,6 +69,7 @@ applied then, ramps included):
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -108,17 +111,28 @@ SUMMARY_KEYS = (
 
 
 def summarize(log: SimulationLog, series: TimeSeries, robot: Robot, priorities: list[int],
-              collision: CollisionModel | None = None) -> dict[str, Any]:
-    """The summary.json metrics of a run (see the module docstring for the definitions)."""
+              collision: CollisionModel | None = None, distances: np.ndarray | None = None) -> dict[str, Any]:
+    """The summary.json metrics of a run (see the module docstring for the definitions);
+    `distances`: the collision pairs' (`pair_distances`)."""
     lim = series.limits.joint
-    velocity_excess = _excess(np.abs(log.dq), lim.v_max)
-    position_excess = np.maximum(_excess(log.q, lim.q_max), _excess(-log.q, -lim.q_min))
+
+    def excesses(states: slice, limits: slice) -> list[np.ndarray]:
+        """Each bound family's excess (samples, bounds) of the samples `states` under the limits of
+        the samples `limits`."""
+        q, joint = log.q[states], series.limits.joint
+        out = [np.maximum(_excess(q, joint.q_max[limits]), _excess(-q, -joint.q_min[limits])),
+               _excess(np.abs(log.dq[states]), joint.v_max[limits]),
+               _cartesian_excess(series, robot, states, limits)]
+        if collision is not None and distances is not None and collision.pairs:
+            out.append(np.maximum(np.array([p.min_distance for p in collision.pairs]) - distances[states], 0.0))
+        return out
+
+    position_excess, velocity_excess, cartesian_excess, *_ = excesses(slice(None), slice(None))
     acceleration_errors = {str(p): _mean_norm(series.acceleration_errors[p]) for p in priorities}
     waypoints = log.waypoint_times
     disturbance = log.tau_ext_true + series.payload_torque
     torque_jump = np.abs(np.diff(log.tau, axis=0))
-    cartesian_excess = _cartesian_excess(series, robot)
-    crossed = _crossed_after_ok(log, (position_excess, velocity_excess, cartesian_excess))
+    crossed = _crossed_after_ok(log, excesses)
     per_joint = {  # (samples, joints) whose peak is a metric
         "max_joint_position_violation": position_excess,
         "max_joint_velocity_violation": velocity_excess,
@@ -322,23 +336,27 @@ def _rms_norm(errors: np.ndarray) -> float:
     return float(np.sqrt(np.mean(np.sum(errors**2, axis=1)))) if errors.size else 0.0
 
 
-def _cartesian_excess(series: TimeSeries, robot: Robot) -> np.ndarray:
-    """(samples, bounds): how far each Cartesian bound's coordinate is outside [c_min, c_max], m."""
-    limits = series.limits
-    excess = np.zeros(limits.c_min.shape)
+def _cartesian_excess(series: TimeSeries, robot: Robot, states: slice = slice(None),
+                      limits: slice = slice(None)) -> np.ndarray:
+    """(samples, bounds): how far each Cartesian bound's coordinate at the samples `states` is
+    outside [c_min, c_max] of the samples `limits`, m."""
+    c_min, c_max = series.limits.c_min[limits], series.limits.c_max[limits]
+    excess = np.zeros(c_min.shape)
     for i, b in enumerate(robot.cartesian_bounds):
-        c = b.coordinate(series.frame_positions[b.frame])
-        excess[:, i] = np.maximum(_excess(c, limits.c_max[:, i]), _excess(-c, -limits.c_min[:, i]))
+        c = b.coordinate(series.frame_positions[b.frame][states])
+        excess[:, i] = np.maximum(_excess(c, c_max[:, i]), _excess(-c, -c_min[:, i]))
     return excess
 
 
-def _crossed_after_ok(log: SimulationLog, excesses: tuple[np.ndarray, ...]) -> np.ndarray:
-    """The samples k whose step had status 0 and left some bound's excess (samples, bounds) larger
-    at k+1 by more than CROSSING_TOLERANCE."""
+def _crossed_after_ok(log: SimulationLog, excesses: Callable[[slice, slice], list[np.ndarray]]) -> np.ndarray:
+    """The samples k whose step had status 0 and left some bound's excess larger at k+1 by more
+    than CROSSING_TOLERANCE, both under the limits of sample k (`excesses(states, limits)`): the
+    ones that step held."""
+    held = slice(None, -1)
     grew = np.zeros(max(len(log.status) - 1, 0), dtype=bool)
-    for excess in excesses:
-        if excess.size:
-            grew |= (np.diff(excess, axis=0) > CROSSING_TOLERANCE).any(axis=1)
+    for before, after in zip(excesses(held, held), excesses(slice(1, None), held), strict=True):
+        if before.size:
+            grew |= (after - before > CROSSING_TOLERANCE).any(axis=1)
     return np.flatnonzero(grew & (log.status[:-1] == 0))
 
 

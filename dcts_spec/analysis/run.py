@@ -70,13 +70,13 @@ def analyze(sim: Simulation, log: SimulationLog, label: str | None = None,
         "mass_scale": sim.scenario.mass_scale,
     }
     collision = sim.collision
-    summary |= summarize(log, series, robot, priorities, collision)
+    distances = pair_distances(collision, robot, log.q)
+    summary |= summarize(log, series, robot, priorities, collision, distances)
     # A closed form (osc, projector) has no joint or Cartesian bound rows: no step of it is checked,
     # so none is "relaxed" (its status is 0 whatever the bounds: a count of 0 read as "held")
     summary["bounds_checked"] = bool(sim.runtime.nx)
     if not summary["bounds_checked"]:
         summary["limits_relaxed"] = summary["crossed_after_ok_steps"] = None
-    distances = pair_distances(collision, robot, log.q)
     summary |= collision_metrics(collision, distances, log.time)
     summary["units"] = summary_units(summary, series, robot)
     result = RunResult(label or sim.formulation, robot, log, series, summary, priorities,
