@@ -35,6 +35,25 @@ from .hierarchy import NULL_SPACE_REGULARIZATION, least_squares_objective, level
 from .problem import ControlProblem
 from .qp import INF, Affine, ControlLaw, PriorityVariables, with_limits
 
+# A level with a run-time activation leaves the freedom N_k z (z: a joint acceleration, n of them
+# for fewer directions). Where a level is half active or damped, N_k is no projector: the levels
+# below it leak into its directions with a gain as small as 1e-7. Unbounded, a stage could grow z
+# to 1e9 along such a direction to win a few rad/s² of a level above (found from outside: an
+# xArm7 with two half-active levels, its reach level at s = 1 in the C runtime and 0.135 in the
+# Python one, the torques 40.7 Nm apart, both status "ok"; at 1e9 the tasks' model is rounding).
+# So z is bounded at this many times the largest joint acceleration the torque limits can give,
+# a bound no physical answer reaches, at which a leak of 1e-7 moves a task by ~1e-2 of its units.
+RELEASED_REACH = 10.0
+
+
+def released_bound(problem: ControlProblem) -> ca.SX:
+    """RELEASED_REACH × max_j (|a₀ⱼ| + Σₖ |M⁻¹ⱼₖ| (τ_max,k + |gₖ|)): a bound on every |a_j| the
+    torque limits allow (a = a₀ + M⁻¹(τ − g)), times the margin."""
+    reach = ca.fabs(problem.free_acceleration) + ca.mtimes(
+        ca.fabs(problem.mass_matrix_inverse), problem.torque_limit + ca.fabs(problem.gravity))
+    return RELEASED_REACH * ca.mmax(reach)
+
+
 def dcts(problem: ControlProblem) -> ControlLaw:
     """The DCTS lexicographic QP with torque, joint and Cartesian bounds."""
     structure = level_structure(problem)
@@ -95,8 +114,9 @@ def dcts(problem: ControlProblem) -> ControlLaw:
             H[z, z] += NULL_SPACE_REGULARIZATION * symmetric_product(complement, complement)
     acceleration = Affine(a.offset, matrix)
 
-    lbx = [0.0] * k + [-INF] * (nx - k)
-    ubx = [1.0] * k + [INF] * (nx - k)
+    z_max = released_bound(problem) if released else INF
+    lbx = [0.0] * k + [-INF] * (nx - k - nz) + [-z_max] * nz
+    ubx = [1.0] * k + [INF] * (nx - k - nz) + [z_max] * nz
     qp, torque = with_limits(problem, acceleration, H, f, lbx, ubx, variables, priorities, mass_acceleration)
     scaling = Affine(ca.SX.zeros(len(levels)), ca.SX(len(levels), nx))
     for i in range(k):
