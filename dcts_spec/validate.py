@@ -20,7 +20,7 @@ from .spec.scenario import run_steps_problem
 from .spec.tasks import TaskSpec
 from .spec.types import size_of
 from .spec.units import joint_to_si, to_si
-from .validate_collision import CollisionReport, check_collision
+from .validate_collision import CollisionReport, check_collision, target_diagnostics
 from .validate_parameters import check_parameters
 from .tasks import CartesianTask, JointTask, make_task, task_dimension, task_joints
 
@@ -151,6 +151,9 @@ def validate_spec(spec: Spec) -> ValidationReport:
     diags += _check_cartesian_bounds(spec, robot, q0)
     collision, collision_diags = check_collision(spec, robot, q0)
     diags += collision_diags
+    if collision is not None:
+        diags += target_diagnostics(spec, robot, collision.model,
+                                    [(t.frame, at, what, p) for t, at, what, p in _position_targets(spec)])
     if any(d.severity == "error" for d in diags):
         raise SpecError(diags)
     levels, level_diags = _levels(spec, robot, q0)

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from .limits.collision import collision_rows, distance_function
+from .limits.collision import collision_rows, distance_function, obstacle_distance
 from .robot.collision import CollisionModel, resolve_collision
 from .robot.model import Robot
 from .spec import Diagnostic, Spec
@@ -77,3 +77,44 @@ def _where(spec: Spec, a: str, b: str) -> tuple:
     if spec.scenario is not None and spec.scenario.initial_q is not None:
         return ("scenario", "initial_q")
     return ("limits", "collision")
+
+
+def target_diagnostics(spec: Spec, robot: Robot, model: CollisionModel,
+                       targets: list[tuple[str, tuple, str, np.ndarray]]) -> list[Diagnostic]:
+    """A warning for each constant position target (frame, key path, wording, position) that puts its
+    frame closer to an obstacle than a watched pair allows, where the frame's origin lies within
+    that pair's link shapes (so the link could not get there either): at the bound the task's
+    scaling falls to 0 and it coasts, as at a Cartesian bound (validate._check_cartesian_bounds)."""
+    diags = []
+    for frame, at, what, position in targets:
+        fid, warned = robot.model.getFrameId(frame), set()
+        for pair in model.pairs:
+            if pair.b.frame is not None or pair.b.name in warned or not _origin_within(robot, fid, pair.a):
+                continue
+            d = obstacle_distance(pair.b, position)
+            if d < pair.min_distance:
+                warned.add(pair.b.name)
+                where = f"inside {pair.b.name}" if d < 0 else f"{d:.3g} m from {pair.b.name}"
+                diags.append(spec.source.diagnostic(
+                    at, f"{what} puts {frame} {where}, where {pair.a.name} keeps {pair.min_distance:g} m from it "
+                        f"(limits.collision): at that bound the task's scaling falls to 0 (direction kept), so it "
+                        f"stops accelerating {frame}, and motion along the obstacle is no longer damped; put the "
+                        "target outside", "warning"))
+    return diags
+
+
+def _origin_within(robot: Robot, fid: int, link: Body) -> bool:
+    """Is the origin of frame `fid` inside one of the link's swept shapes (the two on one joint)?"""
+    frame, body = robot.model.frames[fid], robot.model.frames[robot.model.getFrameId(link.frame)]
+    if frame.parentJoint != body.parentJoint:
+        return False
+    p = (body.placement.inverse() * frame.placement).translation  # (in the link's frame)
+    for shape in link.shapes:
+        if not shape.swept:
+            continue
+        axis = shape.end - shape.start
+        t = 0.0 if not axis.any() else float(np.clip((p - shape.start) @ axis / (axis @ axis), 0.0, 1.0))
+        if np.linalg.norm(p - (shape.start + t * axis)) <= shape.radius:
+            return True
+    return False
+

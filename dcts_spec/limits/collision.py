@@ -54,8 +54,9 @@ def _pair_row(pair: WatchedPair, activation: float, robot: SymbolicRobot, dt: fl
     return AccelerationRows(jacobian, bias, ca.if_else(near, lower, INACTIVE), upper, [pair.name], excess)
 
 
-def _placed(shape: Shape, body: Body, robot: SymbolicRobot) -> Swept | Box | HalfSpace:
-    """A shape in the world: a link's moves with its frame, an obstacle's is a constant."""
+def _placed(shape: Shape, body: Body, robot: SymbolicRobot | None) -> Swept | Box | HalfSpace:
+    """A shape in the world: a link's moves with its frame (`robot` needed), an obstacle's is a
+    constant."""
     if shape.kind == "box":
         return Box(shape.start, shape.rotation, shape.half)
     if shape.kind == "plane":
@@ -83,6 +84,13 @@ def _point_terms(body: Body, point: ca.SX, normal: ca.SX, robot: SymbolicRobot) 
     jacobian = ca.mtimes(normal.T, jac[:3, :]) + ca.mtimes(ca.cross(r, normal).T, jac[3:, :])
     acceleration = bias[:3] + ca.cross(bias[3:], r) + ca.cross(omega, ca.cross(omega, r))
     return jacobian, ca.dot(normal, acceleration)
+
+
+def obstacle_distance(obstacle: Body, point) -> float:
+    """The signed distance of a point of the world to an obstacle (its nearest shape), m."""
+    p = ca.DM(point)
+    return min(float(closest(Swept(p, p, 0.0, True), _placed(shape, obstacle, None)).distance)
+               for shape in obstacle.shapes)
 
 
 def distance_function(model: CollisionModel, robot: SymbolicRobot) -> ca.Function:
