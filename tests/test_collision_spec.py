@@ -189,3 +189,17 @@ def test_a_position_target_an_obstacle_keeps_out_is_a_warning_at_the_target() ->
     (near,) = warnings([0.5, 0.0, 0.46])  # (0.01 m from the ball's surface)
     assert "puts link7 0.01 m from ball" in near.message
     assert not warnings([0.5, 0.0, 0.7])
+
+
+@pytest.mark.parametrize("self_collision", [False, True])
+def test_shapes_on_a_link_fixed_to_the_world_that_no_pair_watches_are_a_warning(self_collision) -> None:
+    """Primitives on the world-fixed base pair only with the robot's own links (self_collision):
+    against an obstacle neither moves, and they were accepted and never watched without a word
+    (found from outside)."""
+    section = {"links": {"base": [{"type": "sphere", "radius": 0.1}]}, "self_collision": self_collision,
+               "obstacles": {"ball": {"type": "sphere", "center": [0.5, 0.0, 0.85], "radius": 0.05}}}
+    spec = load_spec_text(_spec(section), "c.yaml")
+    _, diags = resolve_collision(spec, resolve_robot(spec)[0])
+    warned = [d for d in diags if "fixed to the world and in no watched pair" in d.message]
+    assert len(warned) == (0 if self_collision else 1)
+    assert all(d.severity == "warning" and format_path(d.path) == "limits.collision.links.base" for d in warned)

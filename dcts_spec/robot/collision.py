@@ -123,6 +123,12 @@ class _Resolver:
         obstacles = self._obstacles()
         bodies = {b.name: b for b in (*links, *obstacles)}
         pairs = self._pairs(links, obstacles, bodies)
+        watched = {body.name for pair in pairs for body in (pair.a, pair.b)}
+        for link in links:
+            if link.joint == WORLD and link.name in self.section.links and link.name not in watched:
+                self.error(("links", link.name), f"{link.name} is fixed to the world and in no watched pair: its "
+                           "shapes are never watched (against an obstacle neither moves); to keep the robot's links "
+                           "off it, set self_collision: true or list its pairs", "warning")
         if not pairs and not any(d.severity == "error" for d in self.diags):
             self.error((), "no pair is watched: give links primitives (`links`), obstacles, or `pairs`", "warning")
         return CollisionModel(tuple(links), tuple(obstacles), tuple(pairs), self.section.activation_distance), self.diags
