@@ -100,9 +100,10 @@ def recursive_hierarchy(
     correction, J̄ diag(a) (v − J̇q̇ − J a), and takes the same fraction of its directions from the
     levels below, N − J̄ diag(a) J N. At a = 1 this is the level itself (exact); at a = 0 the row
     has no effect at all: it neither moves the robot nor takes any direction from the levels below,
-    as if the task were not in the spec. In between the torque moves smoothly (the level's own
-    share linearly), so a ramped activation switches a task on or off without a jump; the levels
-    below then see a blend of the projectors and may leak into a half-active task's directions.
+    as if the task were not in the spec. In between this map moves smoothly (the level's own share
+    linearly); the levels below see a blend of the projectors and may leak into a half-active
+    task's directions. (The lexicographic solve over it does not: where a bound binds, a level
+    at any activation above 0 is a priority, and a switch jumps the torque: README, parameters.)
     """
     n = problem.n
     Minv = problem.mass_matrix_inverse if metric_inverse is None else metric_inverse
