@@ -251,7 +251,7 @@ def test_an_orientation_reference_is_ramped_the_short_way_round(rpy, largest_ste
 
 
 # An xArm7 whose orientation @1 and elbow height @3 can be switched at run time, its reach @2
-# between them (found from outside, the states saved in tests/data/half_active_levels.npz: a, b, c).
+# between them (found from outside, the states saved in tests/data/half_active_levels.npz: a to d).
 HALF_ACTIVE = """version: 1
 name: xarm_half_active
 robot:
@@ -288,7 +288,7 @@ def half_active_states():
 
     data = np.load(Path(__file__).parent / "data" / "half_active_levels.npz")
     return {k: tuple(data[f"{k}_{f}"] for f in ("q", "dq", "tau_ext", "param")) + (int(data[f"{k}_steps"]),)
-            for k in "abc"}
+            for k in "abcd"}
 
 
 def step_at(runtime, state):
@@ -328,4 +328,16 @@ def test_levels_below_a_half_active_level_get_no_unbounded_freedom():
     s = result.scaling[1]
     assert result.status == 0 and s < 0.5, (result.status, s)
     assert np.linalg.norm(achieved - s * desired) < 0.2 * np.linalg.norm(desired)
+
+
+def test_a_scaling_stage_daqp_calls_infeasible_is_tried_at_gentler_steps():
+    """At state d, below two partly active levels, the Python runtime's DAQP called elbow_z's
+    scaling stage infeasible at its first step (ρ = 1e-8), and the level was bent to s = 0.26
+    where HiGHS, on the same stage, and the C runtime reach s = 1 (found from outside: the torques
+    0.85 Nm apart, both status "ok"). The stage is now tried at SCALE_RETRY_STEPS first."""
+    from dcts_spec.robot.builtin import example_robot_data_dir
+
+    controller = build_controller(load_spec_text(HALF_ACTIVE.format(urdf=example_robot_data_dir())))
+    result = step_at(controller, half_active_states()["d"])
+    assert result.status == 0 and result.scaling[2] == pytest.approx(1.0, abs=1e-9), result.scaling
 

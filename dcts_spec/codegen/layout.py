@@ -260,7 +260,6 @@ def workspace_fields(nq: int, nref: int, nx: int, na: int, nlevels: int, casadi_
         ("nfree", "int", 3, "the free variables of each DAQP state's last QP"),
         ("answered", "int", 3, "each DAQP state's last QP solved, its answer holding every row (ctl_hold_face)"),
         ("sliver", "int", 0, "the bounds were relaxed this step: a failed QP is tried again with its rows widened"),
-        ("exit_flag", "int", 0, "DAQP's exit flag of the last QP (Cascade.exit_flag)"),
         ("daqp_real", "double", max(daqp_doubles, 1), "DAQP's arrays (factorizations, working sets) of every state: no heap"),
         ("daqp_int", "int", max(daqp_ints, 1), ""),
     ]

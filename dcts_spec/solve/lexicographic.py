@@ -68,14 +68,15 @@ from .stage_qp import (
 SCALE_STEP = 1e-8
 BEND_STEP = 1e-5
 MAX_EXTRAPOLATION = 1e6
-# A scaling stage whose first QP DAQP fails other than by calling it infeasible (cycling) is run
-# again at these gentler steps (a shorter first step, the same maximum): on a Kinova's 4 levels,
-# with two rows held by the level above (`_hold_face`), DAQP cycled at 1e-8, the stage counted as
-# infeasible, and the level was bent to s = 0 where s = 0.924 holds every row (the independent
-# reference's answer; found from outside, in 31 of 150 states around that one). Where DAQP calls
-# the stage infeasible, it bends as before.
+# A scaling stage whose first QP DAQP fails is run again at these gentler steps (a shorter first
+# step, the same maximum): on a Kinova's 4 levels, with two rows held by the level above
+# (`_hold_face`), DAQP cycled at 1e-8, the stage counted as infeasible, and the level was bent to
+# s = 0 where s = 0.924 holds every row (the independent reference's answer; found from outside,
+# in 31 of 150 states around that one). Also where DAQP calls it infeasible: below two partly
+# active levels of an xArm7 the Python runtime's DAQP did so at 1e-8 where HiGHS and the C
+# runtime reach s = 1, and the level was bent to s = 0.26, the torques 0.85 Nm apart (found from
+# outside). A stage that is infeasible runs two more QPs before its level bends.
 SCALE_RETRY_STEPS = (1e-6, 1e-4)
-DAQP_INFEASIBLE = -1  # DAQP's exit flag for a QP it found infeasible
 # Relative: a relaxed bound is widened this much beyond what was achieved. The stages after the
 # relaxation run on a sliver this wide around the least violation: at 1e-7, every one of them
 # failed in 13 of 574 relaxed states of the TIAGo Pro spec above and 2 of 592 of a 24-joint G1's
@@ -269,7 +270,6 @@ class Cascade:
         # each row's bounds when it is not held (what a dropped row is checked on, or gets back)
         self._open_lba, self._open_uba = self.lba.copy(), self.uba.copy()
         self.bent: list[bool] = []  # by level: did `levels` bend it
-        self.exit_flag = 1  # DAQP's exit flag of the last QP (`_solve`)
         self._set_row_bounds()
 
     def _set_row_bounds(self) -> None:
@@ -284,16 +284,15 @@ class Cascade:
         clip_to_daqp(lbx, lower[: lbx.size])
         clip_to_daqp(ubx, upper[: ubx.size])
         qp = FixedEliminated.of(self.A, lower, upper, self._layouts)
-        x, flag, multipliers = daqp_qp(H, f, qp)
+        x, _, multipliers = daqp_qp(H, f, qp)
         if x is None and (feasible or self.relaxed_point is not None):  # (see SLIVER_WIDENING)
             qp = qp.widened(SLIVER_WIDENING)
-            x, flag, multipliers = daqp_qp(H, f, qp)
+            x, _, multipliers = daqp_qp(H, f, qp)
             if x is None:
-                x, flag, multipliers = daqp_qp(H, f, qp, SLIVER_PRIMAL_TOL)
+                x, _, multipliers = daqp_qp(H, f, qp, SLIVER_PRIMAL_TOL)
         if x is not None and qp.faint.size and not self._holds(x):  # (see DAQP_ZERO_TOL)
             qp = FixedEliminated.of(self.A, lower, upper, self._layouts, faint_bounded=True)
-            x, flag, multipliers = daqp_qp(H, f, qp)
-        self.exit_flag = flag  # (DAQP's, of its last solve: 1 also where the answer crossed a row)
+            x, _, multipliers = daqp_qp(H, f, qp)
         self._last_qp = None
         if x is None or not self._holds(x):
             return None
@@ -423,7 +422,7 @@ class Cascade:
         linear[s] = -1.0 / self.nominal[s]
         for step in (SCALE_STEP, *SCALE_RETRY_STEPS):  # (see SCALE_RETRY_STEPS)
             x = self._proximal(np.zeros(lbx.size), linear, step, lbx, ubx, feasible=feasible)
-            if x is not None or self.exit_flag == DAQP_INFEASIBLE:
+            if x is not None:
                 break
         return x
 
