@@ -3,7 +3,7 @@ the distance rows cost in the compiled controller."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import casadi as ca
 import numpy as np
@@ -109,12 +109,7 @@ def _origin_within(robot: Robot, fid: int, link: Body) -> bool:
     if frame.parentJoint != body.parentJoint:
         return False
     p = (body.placement.inverse() * frame.placement).translation  # (in the link's frame)
-    for shape in link.shapes:
-        if not shape.swept:
-            continue
-        axis = shape.end - shape.start
-        t = 0.0 if not axis.any() else float(np.clip((p - shape.start) @ axis / (axis @ axis), 0.0, 1.0))
-        if np.linalg.norm(p - (shape.start + t * axis)) <= shape.radius:
-            return True
-    return False
+    swept = tuple(shape for shape in link.shapes if shape.swept)
+    # (the shapes as constants of the link's frame, where p is: an obstacle's distance)
+    return bool(swept) and obstacle_distance(replace(link, frame=None, shapes=swept), p) <= 0.0
 

@@ -69,7 +69,6 @@ applied then, ramps included):
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -127,12 +126,14 @@ def summarize(log: SimulationLog, series: TimeSeries, robot: Robot, priorities: 
             out.append(np.maximum(np.array([p.min_distance for p in collision.pairs]) - distances[states], 0.0))
         return out
 
-    position_excess, velocity_excess, cartesian_excess, *_ = excesses(slice(None), slice(None))
+    now = excesses(slice(None), slice(None))
+    position_excess, velocity_excess, cartesian_excess, *_ = now
     acceleration_errors = {str(p): _mean_norm(series.acceleration_errors[p]) for p in priorities}
     waypoints = log.waypoint_times
     disturbance = log.tau_ext_true + series.payload_torque
     torque_jump = np.abs(np.diff(log.tau, axis=0))
-    crossed = _crossed_after_ok(log, excesses)
+    # (each sample k+1 under the limits sample k held)
+    crossed = _crossed_after_ok(log, now, excesses(slice(1, None), slice(None, -1)))
     per_joint = {  # (samples, joints) whose peak is a metric
         "max_joint_position_violation": position_excess,
         "max_joint_velocity_violation": velocity_excess,
@@ -348,15 +349,15 @@ def _cartesian_excess(series: TimeSeries, robot: Robot, states: slice = slice(No
     return excess
 
 
-def _crossed_after_ok(log: SimulationLog, excesses: Callable[[slice, slice], list[np.ndarray]]) -> np.ndarray:
+def _crossed_after_ok(log: SimulationLog, now: list[np.ndarray], next_held: list[np.ndarray]) -> np.ndarray:
     """The samples k whose step had status 0 and left some bound's excess larger at k+1 by more
-    than CROSSING_TOLERANCE, both under the limits of sample k (`excesses(states, limits)`): the
-    ones that step held."""
-    held = slice(None, -1)
+    than CROSSING_TOLERANCE: `now`, each bound family's excess (samples, bounds) under its own
+    sample's limits; `next_held`, the one of sample k+1 under the limits of sample k (the ones
+    that step held)."""
     grew = np.zeros(max(len(log.status) - 1, 0), dtype=bool)
-    for before, after in zip(excesses(held, held), excesses(slice(1, None), held), strict=True):
-        if before.size:
-            grew |= (after - before > CROSSING_TOLERANCE).any(axis=1)
+    for excess, after in zip(now, next_held, strict=True):
+        if excess.size:
+            grew |= (after - excess[:-1] > CROSSING_TOLERANCE).any(axis=1)
     return np.flatnonzero(grew & (log.status[:-1] == 0))
 
 

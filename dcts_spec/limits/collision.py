@@ -87,7 +87,8 @@ def _point_terms(body: Body, point: ca.SX, normal: ca.SX, robot: SymbolicRobot) 
 
 
 def obstacle_distance(obstacle: Body, point) -> float:
-    """The signed distance of a point of the world to an obstacle (its nearest shape), m."""
+    """The signed distance of a point to an obstacle (its nearest shape), m: both in the world, or
+    in any frame the body's shapes are constants of (a link's own, as validation uses it)."""
     p = ca.DM(point)
     return min(float(closest(Swept(p, p, 0.0, True), _placed(shape, obstacle, None)).distance)
                for shape in obstacle.shapes)
